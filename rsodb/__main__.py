@@ -1,0 +1,5 @@
+import sys
+
+from rsodb.cli import main
+
+sys.exit(main())

@@ -1,0 +1,39 @@
+#!/usr/bin/env bash
+# One command for a new machine: system library, virtual environment, the project and its
+# extras, then the main job on the bundled samples.
+#   bash setup.sh              set up and run the main job
+#   bash setup.sh --no-run     set up only (used by test.sh)
+set -euo pipefail
+cd "$(dirname "$0")"
+
+run_main_job=1
+[[ "${1:-}" == "--no-run" ]] && run_main_job=0
+
+# Open3D's wheel links libusb-1.0 at import time.
+if ! ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0'; then
+    echo "installing libusb-1.0-0 (needed by Open3D)"
+    SUDO=""; [[ $(id -u) -ne 0 ]] && SUDO="sudo"
+    $SUDO apt-get install -y libusb-1.0-0 >/dev/null 2>&1 \
+        || { $SUDO apt-get update >/dev/null && $SUDO apt-get install -y libusb-1.0-0 >/dev/null; }
+fi
+
+PYTHON="${PYTHON:-python3.11}"
+command -v "$PYTHON" >/dev/null || PYTHON=python3
+if [[ ! -x .venv/bin/python ]]; then
+    "$PYTHON" -m venv .venv
+fi
+stamp=.venv/.rsodb-installed
+if [[ ! -f $stamp || pyproject.toml -nt $stamp ]]; then
+    .venv/bin/python -m pip install --quiet --upgrade pip
+    # The 'cycles' extra (Blender's bpy) exists for CPython 3.11 only.
+    extras="dev"
+    .venv/bin/python -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))' && extras="dev,cycles"
+    .venv/bin/python -m pip install --quiet -e ".[$extras]"
+    touch "$stamp"
+fi
+
+if [[ $run_main_job -eq 1 ]]; then
+    rm -rf archive
+    .venv/bin/rsodb ingest data_samples --archive archive
+    .venv/bin/rsodb ls --archive archive
+fi
