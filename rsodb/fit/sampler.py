@@ -1,0 +1,439 @@
+"""emcee's ensemble sampler with a resumable HDF5 chain, a process pool and a seeded start.
+
+`run_sampler(posterior, settings, chain_path)` is the one entry point:
+
+- the chain lives in an ``emcee.backends.HDFBackend`` file (normally
+  ``archive.chain_path(pass_id, name)``); every step is written as it is taken, so a run
+  killed at any moment (even with SIGKILL) resumes from its last stored step when called
+  again with the same settings. The random state is stored with each step, so the resumed
+  chain is the one an uninterrupted run would have produced.
+- every `checkpoint_every` steps the chain file is copied atomically beside itself
+  (``.bak``); if a kill lands in the middle of an HDF5 write and leaves the file unreadable,
+  the run restarts from that copy instead of from scratch.
+- walkers start either from the prior (``init="prior"``) or from a short global search
+  (``init="search"``: scipy's differential evolution on the log posterior, then a small ball
+  around the best point), so that the ensemble starts in the dominant mode.
+- a fixed `seed` reproduces a run exactly (initial positions, the search and emcee's moves).
+- with ``processes > 1`` the log posterior runs in a ``multiprocessing`` pool whose workers
+  receive the posterior once, at start-up, rather than with every batch of walkers.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+import json
+import math
+import multiprocessing
+import os
+from pathlib import Path
+import shutil
+import time
+from typing import Any, Callable, Mapping
+
+import numpy as np
+
+__all__ = ["SamplerSettings", "ChainRun", "run_sampler", "INITIALISERS", "read_chain"]
+
+CHAIN_GROUP = "mcmc"
+# Stand-in for -ln p where the posterior is zero, for the minimiser (it needs finite values).
+_IMPOSSIBLE = 1e30
+
+
+@dataclass(frozen=True)
+class SamplerSettings:
+    """How to run the sampler.
+
+    Parameters
+    ----------
+    n_walkers : int
+        Ensemble size; at least twice the number of free parameters.
+    n_steps : int
+        Steps per walker in total (a resumed run stops at the same total).
+    init : {"search", "prior"}
+        Where walkers start: around the best point of a differential-evolution search, or
+        drawn from the prior.
+    search_maxiter, search_popsize : int
+        Generations and population multiplier of the differential-evolution search.
+    ball_fraction : float
+        Radius of the initial ball around the search's best point, as a fraction of each
+        parameter's prior width.
+    processes : int
+        Worker processes for the log posterior (1: in this process; 0: one per core).
+    seed : int
+        Seed of every random choice of the run.
+    checkpoint_every : int
+        Steps between atomic backup copies of the chain file.
+    """
+
+    n_walkers: int = 20
+    n_steps: int = 500
+    init: str = "search"
+    search_maxiter: int = 30
+    search_popsize: int = 8
+    ball_fraction: float = 1e-3
+    processes: int = 1
+    seed: int = 0
+    checkpoint_every: int = 50
+
+    def __post_init__(self):
+        for name in ("n_walkers", "n_steps", "search_maxiter", "search_popsize", "checkpoint_every"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or value < 1:
+                raise ValueError(f"sampler setting {name}={value!r} must be a positive integer")
+        if self.init not in INITIALISERS:
+            raise ValueError(f"sampler setting init={self.init!r} is not one of {', '.join(INITIALISERS)}")
+        if not (isinstance(self.processes, (int, np.integer)) and self.processes >= 0):
+            raise ValueError(f"sampler setting processes={self.processes!r} must be 0 (all cores) or a positive integer")
+        if not (isinstance(self.seed, (int, np.integer)) and self.seed >= 0):
+            raise ValueError(f"sampler setting seed={self.seed!r} must be a non-negative integer")
+        if not (0 < self.ball_fraction < 1):
+            raise ValueError(f"sampler setting ball_fraction={self.ball_fraction!r} must be in (0, 1)")
+
+    @property
+    def n_processes(self) -> int:
+        return (os.cpu_count() or 1) if self.processes == 0 else int(self.processes)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, record: Mapping) -> "SamplerSettings":
+        unknown = sorted(set(record) - set(cls.__dataclass_fields__))
+        if unknown:
+            raise ValueError(f"unknown sampler settings {unknown}; known: {', '.join(cls.__dataclass_fields__)}")
+        return cls(**record)
+
+    def replace(self, **changes) -> "SamplerSettings":
+        return SamplerSettings(**{**asdict(self), **changes})
+
+
+@dataclass(frozen=True, eq=False)
+class ChainRun:
+    """What a sampler run leaves behind (read back from the chain file).
+
+    Attributes
+    ----------
+    names : tuple of str
+        Free parameter names (the chain's last axis).
+    chain : (n_steps, n_walkers, ndim) float
+        Every walker's position at every step (wrapped angles not reduced).
+    log_prob : (n_steps, n_walkers) float
+        Log posterior at those positions.
+    acceptance_fraction : (n_walkers,) float
+    autocorr_time : (ndim,) float
+        Integrated autocorrelation time per parameter, in steps (emcee's estimate with
+        ``tol=0``; unreliable when the chain is shorter than ~50 of them).
+    resumed_from : int
+        Steps already in the file when this call started (0 for a fresh run).
+    steps_run : int
+        Steps taken by this call.
+    elapsed_s : float
+        Wall time of this call, initialisation included.
+    init : mapping
+        How walkers were started (method, search best value, evaluations).
+    chain_path : str
+        The HDFBackend file.
+    """
+
+    names: tuple[str, ...]
+    chain: np.ndarray
+    log_prob: np.ndarray
+    acceptance_fraction: np.ndarray
+    autocorr_time: np.ndarray
+    resumed_from: int
+    steps_run: int
+    elapsed_s: float
+    init: Mapping[str, Any]
+    chain_path: str
+
+    @property
+    def n_steps(self) -> int:
+        return self.chain.shape[0]
+
+    @property
+    def n_walkers(self) -> int:
+        return self.chain.shape[1]
+
+
+# -- log posterior in this process or in pool workers ----------------------------------------
+_WORKER_POSTERIOR = None
+
+
+def _install_worker(posterior) -> None:
+    global _WORKER_POSTERIOR
+    # Each worker is one of `processes` on a small machine: keep numerical libraries to one
+    # thread so workers do not fight over cores.
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    _WORKER_POSTERIOR = posterior
+
+
+def _worker_log_prob(theta: np.ndarray) -> float:
+    return _WORKER_POSTERIOR(theta)
+
+
+def _worker_cost(theta: np.ndarray) -> float:
+    value = _WORKER_POSTERIOR(theta)
+    return -value if math.isfinite(value) else _IMPOSSIBLE
+
+
+@dataclass(frozen=True, eq=False)
+class _Cost:
+    """-ln p for a minimiser, in this process."""
+
+    posterior: Any
+
+    def __call__(self, theta):
+        value = self.posterior(theta)
+        return -value if math.isfinite(value) else _IMPOSSIBLE
+
+
+@dataclass(eq=False)
+class _Evaluator:
+    """Where log posteriors run: `log_prob`/`cost` functions and the `map` that applies them."""
+
+    posterior: Any
+    pool: Any = None
+    log_prob: Callable = field(init=False)
+    cost: Callable = field(init=False)
+    map: Callable = field(init=False)
+
+    def __post_init__(self):
+        if self.pool is None:
+            self.log_prob, self.cost, self.map = self.posterior, _Cost(self.posterior), map
+        else:
+            self.log_prob, self.cost, self.map = _worker_log_prob, _worker_cost, self.pool.map
+
+
+def _open_pool(posterior, processes: int):
+    if processes <= 1:
+        return None
+    # spawn, not fork: the parent may hold threads (tqdm, Dask, Open3D) that fork would copy
+    # in a locked state.
+    context = multiprocessing.get_context("spawn")
+    return context.Pool(processes, initializer=_install_worker, initargs=(posterior,))
+
+
+# -- initialisation -----------------------------------------------------------------------
+def _reflect_into(theta: np.ndarray, bounds: np.ndarray, periods: np.ndarray) -> np.ndarray:
+    low, high = bounds[:, 0], bounds[:, 1]
+    span = high - low
+    folded = np.mod(theta - low, 2 * span)
+    reflected = low + np.where(folded > span, 2 * span - folded, folded)
+    return np.where(np.isnan(periods), reflected, theta)
+
+
+def _finite_or_redraw(evaluator: _Evaluator, draw: Callable[[int], np.ndarray], n: int, what: str,
+                      attempts: int = 50) -> tuple[np.ndarray, int]:
+    """n positions with a finite log posterior, redrawing the others; (positions, evaluations)."""
+    positions = draw(n)
+    values = np.array(list(evaluator.map(evaluator.log_prob, positions)))
+    evaluations = n
+    for _ in range(attempts):
+        bad = ~np.isfinite(values)
+        if not bad.any():
+            return positions, evaluations
+        positions[bad] = draw(int(bad.sum()))
+        values[bad] = list(evaluator.map(evaluator.log_prob, positions[bad]))
+        evaluations += int(bad.sum())
+    raise RuntimeError(
+        f"could not find {n} starting points {what} where the posterior is non-zero after "
+        f"{evaluations} tries; check that the priors allow the object to be visible"
+    )
+
+
+def init_from_prior(posterior, settings: SamplerSettings, rng: np.random.Generator,
+                    evaluator: _Evaluator) -> tuple[np.ndarray, dict]:
+    """Walkers drawn independently from the prior."""
+    positions, evaluations = _finite_or_redraw(
+        evaluator, lambda k: posterior.space.sample_prior(rng, k), settings.n_walkers, "in the prior")
+    return positions, {"method": "prior", "evaluations": evaluations}
+
+
+def init_from_search(posterior, settings: SamplerSettings, rng: np.random.Generator,
+                     evaluator: _Evaluator) -> tuple[np.ndarray, dict]:
+    """Walkers in a small ball around the best point of a differential-evolution search."""
+    from scipy.optimize import differential_evolution
+
+    space = posterior.space
+    bounds = space.bounds
+    result = differential_evolution(
+        evaluator.cost, bounds, maxiter=settings.search_maxiter, popsize=settings.search_popsize,
+        seed=int(rng.integers(2**31)), polish=False, init="latinhypercube", tol=1e-8,
+        workers=evaluator.map if evaluator.pool is not None else 1,
+        updating="deferred" if evaluator.pool is not None else "immediate",
+    )
+    if result.fun >= _IMPOSSIBLE:
+        raise RuntimeError("the global search found no point where the posterior is non-zero; widen the priors")
+    width = (bounds[:, 1] - bounds[:, 0]) * settings.ball_fraction
+
+    def ball(k: int) -> np.ndarray:
+        theta = result.x + width * rng.standard_normal((k, space.ndim))
+        return _reflect_into(theta, bounds, space.periods)
+
+    positions, evaluations = _finite_or_redraw(evaluator, ball, settings.n_walkers, "around the search's best point")
+    return positions, {"method": "search", "evaluations": int(result.nfev) + evaluations,
+                       "search_best_log_prob": float(-result.fun), "search_best": result.x.tolist(),
+                       "search_generations": int(result.nit)}
+
+
+INITIALISERS = {"prior": init_from_prior, "search": init_from_search}
+
+
+# -- chain file -------------------------------------------------------------------------
+def _backup_path(chain_path: Path) -> Path:
+    return chain_path.with_name(chain_path.name + ".bak")
+
+
+def _atomic_copy(source: Path, target: Path) -> None:
+    partial = target.with_name(target.name + ".partial")
+    shutil.copyfile(source, partial)
+    with open(partial, "rb") as handle:
+        os.fsync(handle.fileno())
+    os.replace(partial, target)
+
+
+def _stored_iteration(chain_path: Path) -> int | None:
+    """Steps stored in the chain file, or None when the file is unreadable."""
+    import h5py
+
+    try:
+        with h5py.File(chain_path, "r") as handle:
+            return int(handle[CHAIN_GROUP].attrs["iteration"])
+    except (OSError, KeyError):
+        return None
+
+
+def _run_identity(posterior, settings: SamplerSettings) -> dict:
+    """What must match for a stored chain to be continued by this run."""
+    return {"names": list(posterior.space.names), "n_walkers": settings.n_walkers, "seed": settings.seed,
+            "init": settings.init, "space": posterior.space.to_dict()}
+
+
+def _prepare_chain_file(chain_path: Path, identity: dict, restart: bool) -> int:
+    """Make `chain_path` usable; return the number of steps it already holds."""
+    import h5py
+
+    backup = _backup_path(chain_path)
+    if restart:
+        for path in (chain_path, backup):
+            path.unlink(missing_ok=True)
+        return 0
+    if not chain_path.exists():
+        return 0
+    stored = _stored_iteration(chain_path)
+    if stored is None:
+        if backup.exists() and _stored_iteration(backup) is not None:
+            # A kill during an HDF5 write can leave the file unreadable: go back to the last copy.
+            os.replace(backup, chain_path)
+            _atomic_copy(chain_path, backup)
+            stored = _stored_iteration(chain_path)
+        else:
+            chain_path.unlink()
+            backup.unlink(missing_ok=True)
+            return 0
+    with h5py.File(chain_path, "r") as handle:
+        previous = json.loads(handle.attrs.get("rsodb_run", "null"))
+    if stored == 0 or previous is None:
+        chain_path.unlink()
+        return 0
+    if previous != identity:
+        changed = sorted(k for k in identity if previous.get(k) != identity[k])
+        raise ValueError(
+            f"the chain in {chain_path} was started with different {', '.join(changed)}; "
+            "run again with restart=True (--restart) to discard it, or restore the original settings"
+        )
+    return stored
+
+
+def read_chain(chain_path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(chain (steps, walkers, ndim), log_prob (steps, walkers), acceptance (walkers,)) from a file."""
+    import emcee
+
+    backend = emcee.backends.HDFBackend(str(chain_path), name=CHAIN_GROUP, read_only=True)
+    iteration = backend.iteration
+    return backend.get_chain(), backend.get_log_prob(), backend.accepted / max(iteration, 1)
+
+
+# -- the entry point ------------------------------------------------------------------------
+def run_sampler(posterior, settings: SamplerSettings, chain_path: str | Path, *, restart: bool = False,
+                progress: bool = True, description: str = "sampling") -> ChainRun:
+    """Run (or resume) emcee on `posterior`, storing the chain in `chain_path`.
+
+    Parameters
+    ----------
+    posterior : Posterior
+        Picklable callable ``theta (ndim,) -> float`` with a ``space``.
+    settings : SamplerSettings
+        Walkers, steps, initialisation, processes and seed.
+    chain_path : str or Path
+        The HDFBackend file. When it already holds steps of a run with the same parameters,
+        walkers and seed, sampling continues from its last step up to ``settings.n_steps``.
+    restart : bool
+        Discard any stored chain and start again.
+    progress : bool
+        Show a progress bar.
+    description : str
+        Label of the progress bar.
+
+    Returns
+    -------
+    ChainRun
+    """
+    import emcee
+    import h5py
+    from emcee.autocorr import integrated_time
+    from tqdm.auto import tqdm
+
+    space = posterior.space
+    if settings.n_walkers < 2 * space.ndim:
+        raise ValueError(
+            f"n_walkers={settings.n_walkers} is fewer than twice the {space.ndim} free parameters; "
+            f"use at least {2 * space.ndim} walkers"
+        )
+    chain_path = Path(chain_path)
+    chain_path.parent.mkdir(parents=True, exist_ok=True)
+    identity = _run_identity(posterior, settings)
+    started = time.perf_counter()
+    stored = _prepare_chain_file(chain_path, identity, restart)
+    remaining = max(settings.n_steps - stored, 0)
+    init_info: dict = {"method": "resumed" if stored else settings.init}
+
+    backend = emcee.backends.HDFBackend(str(chain_path), name=CHAIN_GROUP)
+    pool = _open_pool(posterior, settings.n_processes) if remaining else None
+    try:
+        evaluator = _Evaluator(posterior, pool)
+        sampler = None
+        if stored == 0:
+            rng = np.random.default_rng(settings.seed)
+            positions, init_info = INITIALISERS[settings.init](posterior, settings, rng, evaluator)
+            backend.reset(settings.n_walkers, space.ndim)
+            with h5py.File(chain_path, "a") as handle:
+                handle.attrs["rsodb_run"] = json.dumps(identity)
+                handle.attrs["rsodb_init"] = json.dumps(init_info)
+            sampler = emcee.EnsembleSampler(settings.n_walkers, space.ndim, evaluator.log_prob,
+                                            pool=pool, backend=backend)
+            state = emcee.State(positions, random_state=np.random.RandomState(settings.seed).get_state())
+        else:
+            with h5py.File(chain_path, "r") as handle:
+                init_info = dict(json.loads(handle.attrs.get("rsodb_init", "{}")), resumed_at=stored)
+            if remaining:
+                sampler = emcee.EnsembleSampler(settings.n_walkers, space.ndim, evaluator.log_prob,
+                                                pool=pool, backend=backend)
+                state = None  # continue from the backend's last step and random state
+        if remaining:
+            start = state if state is not None else backend.get_last_sample()
+            with tqdm(total=settings.n_steps, initial=stored, desc=description, unit="step",
+                      disable=not progress, leave=False) as bar:
+                for i, _ in enumerate(sampler.sample(start, iterations=remaining), start=stored + 1):
+                    bar.update(1)
+                    if i % settings.checkpoint_every == 0 or i == settings.n_steps:
+                        _atomic_copy(chain_path, _backup_path(chain_path))
+    finally:
+        if pool is not None:
+            pool.close()
+            pool.join()
+    elapsed = time.perf_counter() - started
+
+    chain, log_prob, acceptance = read_chain(chain_path)
+    autocorr = integrated_time(chain, tol=0) if chain.shape[0] > 1 else np.full(space.ndim, np.nan)
+    return ChainRun(space.names, chain, log_prob, acceptance, np.asarray(autocorr, dtype=float), stored,
+                    remaining, elapsed, init_info, str(chain_path))
