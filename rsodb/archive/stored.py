@@ -1,0 +1,154 @@
+"""What the archive hands back: stored passes, their one-line summaries, and objects."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ingest.observation import Pass
+
+__all__ = ["StoredPass", "PassSummary", "ArchivedObject"]
+
+
+@dataclass(frozen=True, eq=False)
+class StoredPass(Pass):
+    """A `Pass` read back from the archive, with its identity in the archive.
+
+    Attributes
+    ----------
+    pass_id : str
+        Stable, human-readable id: ``NORAD-YYYYmmddTHHMMSS-BAND-site`` (start of the first version,
+        UTC), plus ``-vN`` for version N >= 2.
+    version : int
+        1 for the first file seen for this pass; a changed file for the same pass adds a version.
+    supersedes : str or None
+        The pass id this version replaced.
+    superseded_by : str or None
+        The newer version's pass id; None while this is the current version.
+    ingested_utc : str
+        ISO 8601 UTC time at which this version was committed.
+    """
+
+    pass_id: str = ""
+    version: int = 1
+    supersedes: str | None = None
+    superseded_by: str | None = None
+    ingested_utc: str = ""
+
+    @property
+    def is_current(self) -> bool:
+        """True unless a newer version of this pass is stored."""
+        return self.superseded_by is None
+
+    def lightcurve(self):
+        """This pass as a `rsodb.lightcurve.LightCurve`."""
+        from rsodb.lightcurve import LightCurve
+
+        return LightCurve.from_pass(self)
+
+    def detrend(self):
+        """The light curve with the pass trend (range, phase angle) removed."""
+        return self.lightcurve().detrend()
+
+    def __repr__(self) -> str:
+        return (f"StoredPass({self.pass_id!r}, norad={self.norad}, band={self.band!r}, "
+                f"site={self.site.name!r}, start={str(self.start_utc)[:23]}, n={len(self)}, "
+                f"version={self.version})")
+
+
+@dataclass(frozen=True)
+class PassSummary:
+    """One row of the archive's catalog: enough to list and select passes without their arrays.
+
+    Attributes
+    ----------
+    pass_id, lineage_id : str
+        This version's id and the id of the pass's first version.
+    natural_id : str
+        The id this version's own data gives (``NORAD-start-BAND-site``); differs from
+        `lineage_id` when a changed file moved the start of the pass.
+    version : int
+    supersedes, superseded_by : str or None
+    norad : int
+    name, band, site : str
+        Object name as written in the file, band letter, site name.
+    start_utc, end_utc : numpy.datetime64
+        First and last mid-exposure times (ns precision).
+    n_points : int
+    exposure_s : float
+    source_name, source_sha256, source_format : str
+    ingested_utc : str
+    """
+
+    pass_id: str
+    lineage_id: str
+    natural_id: str
+    version: int
+    supersedes: str | None
+    superseded_by: str | None
+    norad: int
+    name: str
+    band: str
+    site: str
+    start_utc: np.datetime64
+    end_utc: np.datetime64
+    n_points: int
+    exposure_s: float
+    source_name: str
+    source_sha256: str
+    source_format: str
+    ingested_utc: str
+
+    @property
+    def duration_s(self) -> float:
+        """Seconds between first and last sample."""
+        return float((self.end_utc - self.start_utc) / np.timedelta64(1, "s"))
+
+    @property
+    def is_current(self) -> bool:
+        """True unless a newer version of this pass is stored."""
+        return self.superseded_by is None
+
+    def to_dict(self) -> dict:
+        """JSON-ready fields (times as ISO 8601 strings with a trailing Z)."""
+        return {
+            "pass_id": self.pass_id, "norad": self.norad, "name": self.name, "site": self.site,
+            "band": self.band, "start_utc": _iso(self.start_utc), "end_utc": _iso(self.end_utc),
+            "duration_s": round(self.duration_s, 6), "n_points": self.n_points,
+            "exposure_s": self.exposure_s, "version": self.version, "lineage_id": self.lineage_id,
+            "supersedes": self.supersedes, "superseded_by": self.superseded_by,
+            "source_name": self.source_name, "source_sha256": self.source_sha256,
+            "source_format": self.source_format, "ingested_utc": self.ingested_utc,
+        }
+
+
+@dataclass(frozen=True)
+class ArchivedObject:
+    """One object (NORAD number) of the archive.
+
+    Attributes
+    ----------
+    norad : int
+    name, cospar : str
+        As written by the most recently ingested file.
+    n_passes : int
+        Current passes (newest versions only).
+    n_versions : int
+        Stored pass versions, superseded ones included.
+    bands : tuple of str
+    first_utc, last_utc : numpy.datetime64
+        Start of the earliest and of the latest current pass.
+    """
+
+    norad: int
+    name: str
+    cospar: str
+    n_passes: int
+    n_versions: int
+    bands: tuple[str, ...]
+    first_utc: np.datetime64
+    last_utc: np.datetime64
+
+
+def _iso(t: np.datetime64) -> str:
+    return np.datetime_as_string(t, unit="ms") + "Z"
