@@ -138,6 +138,10 @@ class ParameterSpace:
         object.__setattr__(self, "free", free)
         object.__setattr__(self, "fixed", MappingProxyType(fixed))
 
+    def __reduce__(self):
+        # mappingproxy does not pickle; rebuild from plain values (the process pool needs this).
+        return ParameterSpace, (self.free, dict(self.fixed))
+
     # -- shape ----------------------------------------------------------------------------
     @property
     def names(self) -> tuple[str, ...]:

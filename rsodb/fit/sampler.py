@@ -258,8 +258,9 @@ def init_from_search(posterior, settings: SamplerSettings, rng: np.random.Genera
     result = differential_evolution(
         evaluator.cost, bounds, maxiter=settings.search_maxiter, popsize=settings.search_popsize,
         seed=int(rng.integers(2**31)), polish=False, init="latinhypercube", tol=1e-8,
-        workers=evaluator.map if evaluator.pool is not None else 1,
-        updating="deferred" if evaluator.pool is not None else "immediate",
+        # "deferred" updating evaluates whole generations through `map`: the same search
+        # whether it runs here or in the pool.
+        workers=evaluator.map, updating="deferred",
     )
     if result.fun >= _IMPOSSIBLE:
         raise RuntimeError("the global search found no point where the posterior is non-zero; widen the priors")

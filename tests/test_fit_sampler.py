@@ -1,0 +1,184 @@
+"""The emcee wrapper: seeds, process pool, resume after SIGKILL, recovery from a damaged chain
+file, the global search, and posterior widths against the Fisher-matrix answer."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import h5py
+import numpy as np
+import pytest
+
+from rsodb.fit.likelihood import GaussianLikelihood
+from rsodb.fit.parameters import ParameterSpace
+from rsodb.fit.posterior import Posterior
+from rsodb.fit.priors import Uniform
+from rsodb.fit.sampler import SamplerSettings, run_sampler
+
+PROJECT_ROOT = Path(__file__).resolve().parents[1]
+
+
+@dataclass(frozen=True, eq=False)
+class SinusoidModel:
+    """A light curve m(t) = A cos(2 pi t / P + phi): a test double with a known posterior."""
+
+    t_s: np.ndarray
+    amplitude_mag: float = 0.5
+    delay_s: float = 0.0  # per-call sleep, to make a run slow enough to be killed mid-way
+
+    parameters = ("spin_period_s", "spin_phase_deg")
+
+    def magnitudes(self, values):
+        if self.delay_s:
+            time.sleep(self.delay_s)
+        phase = 2 * np.pi * self.t_s / values["spin_period_s"] + np.radians(values["spin_phase_deg"])
+        return self.amplitude_mag * np.cos(phase)
+
+
+TRUTH = {"spin_period_s": 9.86, "spin_phase_deg": 40.0}
+
+
+def make_posterior(delay_s: float = 0.0, period_prior=(9.0, 11.0), n: int = 150, seed: int = 1):
+    t_s = np.linspace(-15.0, 15.0, n)
+    model = SinusoidModel(t_s, delay_s=delay_s)
+    rng = np.random.default_rng(seed)
+    err = np.full(n, 0.05)
+    mag = model.magnitudes(TRUTH) + 12.3 + err * rng.standard_normal(n)
+    space = ParameterSpace.from_names(["spin_period_s", "spin_phase_deg"]).with_prior(
+        "spin_period_s", Uniform(*period_prior))
+    return Posterior(space, model, GaussianLikelihood(mag, err))
+
+
+SMALL = SamplerSettings(n_walkers=8, n_steps=40, init="search", search_maxiter=10, search_popsize=5, seed=7,
+                        checkpoint_every=10)
+
+
+def test_same_seed_gives_the_identical_chain_and_another_seed_does_not(tmp_path):
+    posterior = make_posterior()
+    first = run_sampler(posterior, SMALL, tmp_path / "a.h5", progress=False)
+    second = run_sampler(posterior, SMALL, tmp_path / "b.h5", progress=False)
+    other = run_sampler(posterior, SMALL.replace(seed=8), tmp_path / "c.h5", progress=False)
+    assert first.chain.shape == (40, 8, 2)
+    np.testing.assert_array_equal(first.chain, second.chain)  # bit for bit
+    np.testing.assert_array_equal(first.log_prob, second.log_prob)
+    assert not np.array_equal(first.chain, other.chain)
+
+
+def test_process_pool_reproduces_the_in_process_chain(tmp_path):
+    posterior = make_posterior()
+    settings = SMALL.replace(n_steps=15)
+    alone = run_sampler(posterior, settings, tmp_path / "alone.h5", progress=False)
+    pooled = run_sampler(posterior, settings.replace(processes=2), tmp_path / "pool.h5", progress=False)
+    # The pool only moves evaluations to other processes; results come back in order.
+    np.testing.assert_array_equal(alone.chain, pooled.chain)
+
+
+def test_a_stopped_run_resumes_into_the_uninterrupted_chain(tmp_path):
+    posterior = make_posterior()
+    whole = run_sampler(posterior, SMALL, tmp_path / "whole.h5", progress=False)
+    part = run_sampler(posterior, SMALL.replace(n_steps=15), tmp_path / "part.h5", progress=False)
+    assert part.n_steps == 15
+    rest = run_sampler(posterior, SMALL, tmp_path / "part.h5", progress=False)
+    assert (rest.resumed_from, rest.steps_run) == (15, 25)
+    np.testing.assert_array_equal(rest.chain, whole.chain)
+    again = run_sampler(posterior, SMALL, tmp_path / "part.h5", progress=False)
+    assert again.steps_run == 0 and again.n_steps == 40
+
+
+def test_resume_refuses_a_chain_from_other_settings(tmp_path):
+    posterior = make_posterior()
+    run_sampler(posterior, SMALL.replace(n_steps=5), tmp_path / "c.h5", progress=False)
+    with pytest.raises(ValueError, match=r"c\.h5 was started with different seed; run again with restart=True"):
+        run_sampler(posterior, SMALL.replace(seed=99), tmp_path / "c.h5", progress=False)
+    fresh = run_sampler(posterior, SMALL.replace(seed=99, n_steps=5), tmp_path / "c.h5", progress=False,
+                        restart=True)
+    assert fresh.resumed_from == 0
+
+
+def test_a_damaged_chain_file_falls_back_to_its_last_copy(tmp_path):
+    posterior = make_posterior()
+    path = tmp_path / "chain.h5"
+    run_sampler(posterior, SMALL.replace(n_steps=25), path, progress=False)
+    # What a kill in the middle of an HDF5 metadata write can leave: a file h5py cannot open.
+    data = bytearray(path.read_bytes())
+    data[:64] = bytes(64)
+    path.write_bytes(bytes(data))
+    resumed = run_sampler(posterior, SMALL, path, progress=False)
+    assert resumed.resumed_from == 25  # the copy taken at the last step written
+    whole = run_sampler(posterior, SMALL, tmp_path / "whole.h5", progress=False)
+    np.testing.assert_array_equal(resumed.chain, whole.chain)
+
+
+def test_sigkill_mid_run_then_rerun_continues_where_it_stopped(tmp_path):
+    path = tmp_path / "killed.h5"
+    settings = SMALL.replace(n_steps=120)
+    script = textwrap.dedent(f"""
+        import sys
+        sys.path.insert(0, {str(PROJECT_ROOT)!r})
+        from tests.test_fit_sampler import make_posterior, SMALL
+        from rsodb.fit.sampler import run_sampler
+        run_sampler(make_posterior(delay_s=0.004), SMALL.replace(n_steps=120), {str(path)!r}, progress=False)
+    """)
+    child = subprocess.Popen([sys.executable, "-c", script], cwd=PROJECT_ROOT)
+    deadline = time.monotonic() + 60
+    stored = 0
+    try:
+        while time.monotonic() < deadline and stored < 30 and child.poll() is None:
+            time.sleep(0.05)
+            try:
+                # locking=False: a locking reader would make the writer's next open fail.
+                with h5py.File(path, "r", locking=False) as handle:
+                    stored = int(handle["mcmc"].attrs["iteration"])
+            except (OSError, KeyError):
+                continue
+        assert child.poll() is None, "the run finished before it could be killed; make it slower"
+    finally:
+        os.kill(child.pid, signal.SIGKILL)
+        child.wait()
+    assert child.returncode == -signal.SIGKILL
+    resumed = run_sampler(make_posterior(), settings, path, progress=False)
+    assert 30 <= resumed.resumed_from < 120
+    assert resumed.resumed_from + resumed.steps_run == 120
+    whole = run_sampler(make_posterior(), settings, tmp_path / "whole.h5", progress=False)
+    np.testing.assert_array_equal(resumed.chain, whole.chain)
+
+
+def test_search_start_puts_every_walker_in_the_true_mode_of_a_multimodal_posterior(tmp_path):
+    # Over 30 s a period prior of 5-20 s holds many local modes (cycle-count aliases).
+    posterior = make_posterior(period_prior=(5.0, 20.0))
+    settings = SamplerSettings(n_walkers=8, n_steps=30, init="search", search_maxiter=40, search_popsize=10,
+                               seed=5)
+    run = run_sampler(posterior, settings, tmp_path / "search.h5", progress=False)
+    assert run.init["method"] == "search" and run.init["evaluations"] > 8
+    # Neighbouring aliases are ~P^2 / 30 s = 3 s away; the true mode's width is ~0.005 s.
+    np.testing.assert_allclose(run.chain[-1, :, 0], TRUTH["spin_period_s"], atol=0.05)
+
+
+def test_posterior_widths_match_the_fisher_matrix(tmp_path):
+    posterior = make_posterior()
+    settings = SamplerSettings(n_walkers=16, n_steps=600, init="search", search_maxiter=20, seed=3)
+    run = run_sampler(posterior, settings, tmp_path / "fisher.h5", progress=False)
+    samples = run.chain[200:].reshape(-1, 2)
+    period, phase = samples[:, 0], samples[:, 1]
+    # Fisher matrix of m = A cos(2 pi t / P + phi) with the offset marginalised: derivative
+    # columns minus their (equal-weight) mean, F = J^T J / sigma^2.
+    model = posterior.model
+    t = model.t_s
+    arg = 2 * np.pi * t / np.median(period) + np.radians(np.median(phase))
+    jac = np.column_stack([model.amplitude_mag * np.sin(arg) * 2 * np.pi * t / np.median(period) ** 2,
+                           -model.amplitude_mag * np.sin(arg) * np.pi / 180])
+    jac -= jac.mean(axis=0)
+    cov = np.linalg.inv(jac.T @ jac / 0.05 ** 2)
+    expected = np.sqrt(np.diag(cov))
+    # 16 walkers x 400 kept steps with autocorrelation ~20 steps give ~300 independent
+    # samples: the standard deviation is known to ~1/sqrt(2 * 300) = 4%; 15% is ~4 sigma.
+    np.testing.assert_allclose([period.std(), phase.std()], expected, rtol=0.15)
+    # Truth within 4 posterior sigma (the data are one noise draw).
+    assert abs(np.median(period) - TRUTH["spin_period_s"]) < 4 * expected[0]
+    assert abs(np.median(phase) - TRUTH["spin_phase_deg"]) < 4 * expected[1]
