@@ -9,7 +9,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 import math
 
-__all__ = ["Site", "DERENIVKA", "UZHHOROD", "PRESETS"]
+import numpy as np
+
+__all__ = ["Site", "DERENIVKA", "UZHHOROD", "PRESETS", "WGS84_A_KM", "WGS84_F"]
+
+# WGS84 ellipsoid: equatorial radius and flattening.
+WGS84_A_KM = 6378.137
+WGS84_F = 1.0 / 298.257223563
 
 
 @dataclass(frozen=True)
@@ -57,6 +63,41 @@ class Site:
     def key(self) -> str:
         """Lower-case identifier usable in file and pass names."""
         return "".join(c for c in self.name.lower() if c.isalnum()) or "site"
+
+    @property
+    def itrs_km(self) -> np.ndarray:
+        """(3,) float: the site's Earth-fixed (ITRS) position on the WGS84 ellipsoid, km.
+
+        Examples
+        --------
+        >>> Site("pole", 90.0, 0.0, 0.0).itrs_km.round(3).tolist()
+        [0.0, 0.0, 6356.752]
+        """
+        lat, lon = math.radians(self.lat_deg), math.radians(self.lon_deg)
+        e2 = WGS84_F * (2.0 - WGS84_F)
+        n_km = WGS84_A_KM / math.sqrt(1.0 - e2 * math.sin(lat) ** 2)
+        h_km = self.elevation_m / 1000.0
+        return np.array([
+            (n_km + h_km) * math.cos(lat) * math.cos(lon),
+            (n_km + h_km) * math.cos(lat) * math.sin(lon),
+            (n_km * (1.0 - e2) + h_km) * math.sin(lat),
+        ])
+
+    @property
+    def enu_itrs(self) -> np.ndarray:
+        """(3, 3) float: the local East, North, Up unit vectors (columns) in ITRS.
+
+        Up is the ellipsoid normal (geodetic vertical), so ``enu_itrs.T @ v`` gives a vector's
+        east, north and up components, from which azimuth (from north through east) and
+        geodetic elevation follow.
+        """
+        lat, lon = math.radians(self.lat_deg), math.radians(self.lon_deg)
+        sin_lat, cos_lat, sin_lon, cos_lon = math.sin(lat), math.cos(lat), math.sin(lon), math.cos(lon)
+        return np.array([
+            [-sin_lon, -sin_lat * cos_lon, cos_lat * cos_lon],
+            [cos_lon, -sin_lat * sin_lon, cos_lat * sin_lon],
+            [0.0, cos_lat, sin_lat],
+        ])
 
 
 # Derenivka: the coordinates written by ccd_phot in every SITE_* header of the lab's files.
