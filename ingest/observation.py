@@ -49,6 +49,8 @@ class Reduction:
         Rows used in the regression.
     sign_error : bool
         True when the file added the extinction term (c > 0).
+    zero_point_err_mag, extinction_term_err_mag : float
+        Standard errors of A and c from the regression (NaN when unknown).
     """
 
     zero_point_mag: float
@@ -56,6 +58,8 @@ class Reduction:
     rms_mag: float
     n_points: int
     sign_error: bool
+    zero_point_err_mag: float = float("nan")
+    extinction_term_err_mag: float = float("nan")
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,0 +1,457 @@
+"""Reader for ccd_phot light-curve files (``.phX``, X the filter letter).
+
+Layout (see docs/formats.md for the full description and quirks)::
+
+    # TLE:                                   or   # OMM: {"NORAD_CAT_ID": 22076, ...}
+    # 0 TOPEX/POSEIDON
+    # 1 22076U 92052A   24212.51246405 ...
+    # 2 22076  66.0414 118.8147 ...
+    # 2024-07-30 21:22:40.008849             first frame time
+    # 2024-07-30 21:30:24.170780             last frame time
+    # dt = 0.2                               exposure, s
+    # Filter = V                             optional
+    # Time_format = UT mid                   optional (see `stamp_offset_s`)
+    # COSPAR = 92052A
+    # NORAD  = 22076
+    # NAME   = TOPEX/POSEIDON
+    # SITE_NAME   = Derenivka                 SITE_* optional
+    # SITE_LAT   = 48.5635505
+    # SITE_LON   = 22.453751
+    # SITE_ELEV  = 231.1325
+    #  Date       UT     X  Y  Xerr  Yerr  Flux  Flux_err  magV  mag_err  Az(deg)  El(deg)  Rg(Mm)  filename
+    2024-07-30 21:22:40.008    000.00000 ...                                  (14 columns)
+
+or the JD variant whose rows start with one Julian-date column (13 columns). The range
+column is in km whatever its label says; a ``*`` after the frame's file name marks a
+saturated frame.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import re
+from types import MappingProxyType
+
+import numpy as np
+
+from ingest import elements
+from ingest.errors import FormatError
+from ingest.observation import Pass
+from ingest.reduction import fit_reduction, sign_corrected_mag
+from ingest.table import Column, Rows, read_rows
+from ingest.textfile import TextFile
+from ingest.times import NS_PER_S, date_days, julian_date_ns, time_of_day_ns, to_datetime64
+from raycast.site import DERENIVKA, Site
+
+__all__ = ["CcdPhotReader", "stamp_offset_s", "MID_EXPOSURE_SINCE", "UT_COLUMNS", "JD_COLUMNS"]
+
+# ccd_phot writes mid-exposure times since February 2023 (PROVENANCE.md); before, the
+# frame's start time.
+MID_EXPOSURE_SINCE = np.datetime64("2023-02-01T00:00:00", "ns")
+
+_COMMON = (
+    Column("x_px", "X"), Column("y_px", "Y"), Column("x_err_px", "Xerr"), Column("y_err_px", "Yerr"),
+    Column("flux", "Flux"), Column("flux_err", "Flux_err"), Column("mag", "mag"), Column("mag_err", "mag_err"),
+    Column("az_deg", "Az(deg)"), Column("el_deg", "El(deg)"), Column("range_km", "Rg"),
+    Column("frame", "filename", "text", 256),
+)
+UT_COLUMNS = (Column("date", "Date", "text", 16), Column("ut", "UT", "text", 32)) + _COMMON
+JD_COLUMNS = (Column("jd", "JD", "text", 32),) + _COMMON
+
+# Column labels as ccd_phot writes them; mag and Rg carry a band / unit suffix.
+_LABEL_PATTERNS = {
+    "Date": r"Date", "UT": r"UT", "JD": r"JD", "X": r"X", "Y": r"Y", "Xerr": r"Xerr", "Yerr": r"Yerr",
+    "Flux": r"Flux", "Flux_err": r"Flux_err", "mag": r"mag(\w*)", "mag_err": r"mag_err",
+    "Az(deg)": r"Az(\(deg\))?", "El(deg)": r"El(\(deg\))?", "Rg": r"Rg(\((Mm|Km|km)\))?", "filename": r"filename",
+}
+_KEY_VALUE = re.compile(r"^([A-Za-z][A-Za-z0-9_ ]*?)\s*=\s*(.*)$")
+_DATETIME = re.compile(r"^\d{4}-\d{2}-\d{2}[ T]\d{2}:\d{2}:\d{2}(\.\d+)?$")
+_EXTENSION_BAND = re.compile(r"\.ph([A-Z]|[ubvri])$")
+_STAMP_WORDS = {"start": 0.5, "begin": 0.5, "beginning": 0.5, "mid": 0.0, "middle": 0.0, "center": 0.0,
+                "centre": 0.0, "mid-exposure": 0.0, "end": -0.5}
+_VARIANT_WORDS = {"ut": "ut", "utc": "ut", "date": "ut", "jd": "jd"}
+# The least range (km) at which a satellite is observed from the ground; values below it mean
+# the column is not in km.
+_MIN_RANGE_KM = 100.0
+
+
+@dataclass
+class _Header:
+    """What the `#` lines of a ccd_phot file say (mutable only while being parsed)."""
+
+    keys: dict = field(default_factory=dict)         # key -> (value, line)
+    tle: tuple | None = None
+    tle_line: int | None = None
+    omm: MappingProxyType | None = None
+    omm_line: int | None = None
+    times: list = field(default_factory=list)        # (text, line) of the first/last frame lines
+    notes: list = field(default_factory=list)        # other comment lines
+    column_line: int = 0
+    labels: tuple = ()
+    variant: str = ""
+
+
+def stamp_offset_s(first_stamp: np.datetime64, exposure_s: float, time_format: str | None) -> tuple[float, str]:
+    """Seconds to add to a ccd_phot file's stamps to reach mid-exposure, and why.
+
+    Parameters
+    ----------
+    first_stamp : datetime64
+        The first row's stamp as written.
+    exposure_s : float
+        The header's ``dt``.
+    time_format : str or None
+        The ``# Time_format`` value. A word ``start``/``begin``, ``mid``/``middle``/``centre``
+        or ``end`` in it states the stamp's place in the exposure; without one, files before
+        2023-02-01 are taken to stamp the exposure start and later ones its middle.
+
+    Returns
+    -------
+    shift_s : float
+        ``+dt/2``, ``0`` or ``-dt/2``.
+    stamps : str
+        What the file's stamps were: ``"exposure start"``, ``"mid-exposure"`` or ``"exposure end"``.
+    """
+    words = [w for w in re.split(r"[\s,;/]+", (time_format or "").lower()) if w in _STAMP_WORDS]
+    if words:
+        fraction = _STAMP_WORDS[words[0]]
+    else:
+        fraction = 0.5 if np.datetime64(first_stamp, "ns") < MID_EXPOSURE_SINCE else 0.0
+    stamps = {0.5: "exposure start", 0.0: "mid-exposure", -0.5: "exposure end"}[fraction]
+    return fraction * exposure_s, stamps
+
+
+class CcdPhotReader:
+    """Reads ccd_phot ``.phX`` files (UT and JD variants) into one `Pass` each."""
+
+    name = "ccd_phot"
+
+    def sniff(self, text: TextFile) -> bool:
+        """True when the file's header lines and column line are ccd_phot's."""
+        for number in range(1, min(text.n_lines, 40) + 1):
+            line = text.line(number).lstrip("\ufeff").strip()
+            if not line:
+                continue
+            tokens = line.lstrip("#").split()
+            if tokens[:2] == ["Date", "UT"] or tokens[:1] == ["JD"]:
+                return "Flux" in tokens
+            if not line.startswith("#"):
+                return False
+        return False
+
+    def read(self, path) -> tuple[Pass, ...]:
+        """Read `path`; raise `FormatError` with the line and reason when it is not a valid ccd_phot file."""
+        return self.parse(TextFile.from_path(path))
+
+    def parse(self, text: TextFile) -> tuple[Pass, ...]:
+        """Build the pass from an already loaded file."""
+        header = _parse_header(text)
+        columns = UT_COLUMNS if header.variant == "ut" else JD_COLUMNS
+        rows = read_rows(text, header.column_line + 1, columns)
+        exposure_s = _exposure(text, header)
+        time_format = header.keys.get("Time_format", (None, None))
+        _check_time_format_variant(text, header, time_format)
+
+        stamps_ns = _stamps(text, rows, header.variant)
+        shift_s, stamps = stamp_offset_s(to_datetime64(stamps_ns[:1])[0], exposure_s, time_format[0])
+        time_ns = stamps_ns + int(round(shift_s * NS_PER_S))
+        _check_increasing(text, rows, stamps_ns)
+        _check_values(text, rows, columns)
+
+        norad, name, cospar = _identity(text, header)
+        band, band_source = _band(text, header)
+        site, site_source = _site(text, header)
+        flux = rows["flux"]
+        mag = rows["mag"]
+        reduction = fit_reduction(mag, flux, exposure_s, rows["el_deg"], rows["range_km"])
+        mag_corrected = None
+        if reduction is not None and reduction.sign_error:
+            mag_corrected = sign_corrected_mag(mag, rows["el_deg"], reduction)
+
+        info = {key: value for key, (value, _) in header.keys.items()}
+        info.update(
+            format="ccd_phot",
+            time_variant=header.variant,
+            columns=" ".join(header.labels),
+            range_label=header.labels[columns.index(_column(columns, "range_km"))],
+            file_time_stamps=stamps,
+            band_source=band_source,
+            site_source=site_source,
+            n_saturated=int(_ends_with_star(rows["frame"]).sum()),
+        )
+        if header.times:
+            info["first_frame_utc"] = header.times[0][0]
+            info["last_frame_utc"] = header.times[-1][0]
+        for k, note in enumerate(header.notes):
+            info[f"note_{k + 1}"] = note
+        if reduction is None:
+            info["reduction"] = "not fitted: fewer than 3 usable rows or no airmass spread"
+        elif reduction.rms_mag >= 0.003:
+            info["reduction"] = f"the magnitudes do not follow the ccd_phot law (RMS {reduction.rms_mag:.4f} mag)"
+
+        return (Pass(
+            norad=norad, name=name, band=band, site=site, exposure_s=exposure_s,
+            time_utc=to_datetime64(time_ns),
+            mag=mag, mag_err=rows["mag_err"], flux=flux, flux_err=rows["flux_err"],
+            az_deg=rows["az_deg"], el_deg=rows["el_deg"], range_km=rows["range_km"],
+            saturated=_ends_with_star(rows["frame"]), valid=np.isfinite(mag),
+            cospar=cospar, tle=header.tle, omm=header.omm,
+            time_convention="UTC, mid-exposure", time_shift_s=shift_s,
+            mag_convention=("standard magnitude reduced to 1000 km range: A - 2.5 log10(Flux/dt) + c X "
+                            "- 5 log10(Rg/1000 km), X = 1/sin(El), with the file's signed c (see reduction)"),
+            source_name=text.name, source_sha256=text.sha256, source_format=self.name,
+            reduction=reduction, mag_corrected=mag_corrected,
+            header=MappingProxyType(info),
+        ),)
+
+
+# -- header --------------------------------------------------------------------------------
+def _parse_header(text: TextFile) -> _Header:
+    header = _Header()
+    number = 0
+    while number < text.n_lines:
+        number += 1
+        raw = text.line(number).lstrip("\ufeff")
+        stripped = raw.strip()
+        if not stripped:
+            continue
+        commented = stripped.startswith("#")
+        body = stripped.lstrip("#").strip()
+        tokens = body.split()
+        if tokens[:2] == ["Date", "UT"] or tokens[:1] == ["JD"]:
+            header.column_line = number
+            header.labels = tuple(tokens)
+            header.variant = "ut" if tokens[0] == "Date" else "jd"
+            _check_labels(text, header)
+            return header
+        if not commented:
+            raise text.error(number, "expected the column line ('# Date UT X Y ...' or '# JD X Y ...') before "
+                                     f"the data, found {stripped[:40]!r}")
+        if body == "TLE:":
+            number = _read_tle_block(text, header, number)
+        elif body.startswith("OMM:"):
+            try:
+                header.omm = elements.parse_omm(body[4:].strip())
+            except ValueError as exc:
+                raise text.error(number, f"{exc}; write the record as one JSON object on this line") from None
+            header.omm_line = number
+        elif _DATETIME.match(body):
+            header.times.append((body, number))
+        elif (match := _KEY_VALUE.match(body)) is not None:
+            header.keys[match.group(1).strip()] = (match.group(2).strip(), number)
+        else:
+            header.notes.append(body)
+    raise text.error(text.n_lines, "the header ends without the column line ('# Date UT X Y ...' or "
+                                   "'# JD X Y ...') and no data rows follow")
+
+
+def _read_tle_block(text: TextFile, header: _Header, number: int) -> int:
+    """Read the 2 or 3 TLE lines after '# TLE:'; return the last line number used."""
+    lines = []
+    for k in range(number + 1, min(number + 3, text.n_lines) + 1):
+        body = text.line(k).strip().lstrip("#").strip()
+        if not lines and not body.startswith("1 "):
+            lines.append(body)
+            continue
+        lines.append(body)
+        if body.startswith("2 "):
+            break
+    try:
+        header.tle = elements.parse_tle(lines)
+    except ValueError as exc:
+        raise text.error(number + 1, f"{exc}; fix the TLE block after '# TLE:'") from None
+    header.tle_line = number + 1
+    return number + len(lines)
+
+
+def _check_labels(text: TextFile, header: _Header) -> None:
+    columns = UT_COLUMNS if header.variant == "ut" else JD_COLUMNS
+    expected = [c.label for c in columns]
+    found = header.labels
+    good = len(found) == len(expected) and all(
+        re.fullmatch(_LABEL_PATTERNS[label], token) for label, token in zip(expected, found))
+    if not good:
+        raise text.error(
+            header.column_line,
+            f"the column line reads {' '.join(found)!r}; expected the {len(expected)} ccd_phot columns "
+            f"{' '.join(expected)!r} (mag and Rg may carry a suffix such as magV, Rg(Km))",
+        )
+
+
+def _exposure(text: TextFile, header: _Header) -> float:
+    if "dt" not in header.keys:
+        raise text.error(header.column_line, "the header has no '# dt = ' line; add the exposure time in seconds")
+    value, line = header.keys["dt"]
+    try:
+        exposure_s = float(value)
+    except ValueError:
+        exposure_s = float("nan")
+    if not (np.isfinite(exposure_s) and exposure_s > 0):
+        raise text.error(line, f"dt = {value!r} is not a positive exposure time in seconds")
+    return exposure_s
+
+
+def _check_time_format_variant(text: TextFile, header: _Header, time_format: tuple) -> None:
+    value, line = time_format
+    if value is None:
+        return
+    words = [w for w in re.split(r"[\s,;/]+", value.lower()) if w]
+    unknown = [w for w in words if w not in _STAMP_WORDS and w not in _VARIANT_WORDS and w != "exposure"]
+    if unknown:
+        raise text.error(line, f"Time_format = {value!r} is not understood; write UT or JD, optionally "
+                               "followed by start, mid or end (the stamp's place in the exposure)")
+    variants = {_VARIANT_WORDS[w] for w in words if w in _VARIANT_WORDS}
+    if variants and variants != {header.variant}:
+        raise text.error(line, f"Time_format = {value!r} contradicts the column line, whose time columns are "
+                               f"{'Date UT' if header.variant == 'ut' else 'JD'}")
+
+
+def _identity(text: TextFile, header: _Header) -> tuple[int, str, str]:
+    norad = None
+    if "NORAD" in header.keys:
+        value, line = header.keys["NORAD"]
+        try:
+            norad = int(value)
+        except ValueError:
+            raise text.error(line, f"NORAD = {value!r} is not a catalogue number") from None
+        if norad <= 0:
+            raise text.error(line, f"NORAD = {value!r} is not a catalogue number")
+    for source, element_norad, line in (
+        ("TLE", elements.tle_norad(header.tle) if header.tle else None, header.tle_line),
+        ("OMM", elements.omm_norad(header.omm) if header.omm else None, header.omm_line),
+    ):
+        if element_norad is None:
+            continue
+        if norad is None:
+            norad = element_norad
+        elif element_norad != norad:
+            raise text.error(line, f"the {source} is for NORAD {element_norad} but the header says NORAD {norad}; "
+                                   "the file mixes two objects")
+    if norad is None:
+        raise text.error(header.column_line, "the header names no object: add '# NORAD = <number>' or a TLE/OMM")
+    name = header.keys.get("NAME", ("", 0))[0]
+    if not name and header.tle and len(header.tle) == 3:
+        name = header.tle[0][2:].strip() if header.tle[0].startswith("0 ") else header.tle[0].strip()
+    if not name and header.omm:
+        name = str(header.omm.get("OBJECT_NAME", ""))
+    cospar = header.keys.get("COSPAR", ("", 0))[0]
+    if not cospar and header.tle:
+        cospar = elements.tle_cospar(header.tle)
+    if not cospar and header.omm:
+        cospar = str(header.omm.get("OBJECT_ID", ""))
+    return norad, name, cospar
+
+
+def _band(text: TextFile, header: _Header) -> tuple[str, str]:
+    if "Filter" in header.keys:
+        value, line = header.keys["Filter"]
+        if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_']*", value):
+            raise text.error(line, f"Filter = {value!r} is not a band name such as V or R")
+        return value, "Filter line"
+    match = _EXTENSION_BAND.search(text.name)
+    if match:
+        return match.group(1).upper(), "file extension"
+    mag_label = header.labels[len(header.labels) - 6]
+    suffix = re.fullmatch(_LABEL_PATTERNS["mag"], mag_label).group(1)
+    if suffix:
+        return suffix, "magnitude column name"
+    raise text.error(header.column_line, "cannot tell the band: there is no '# Filter = ' line, the extension is "
+                                         "not .phX and the magnitude column is plain 'mag'; add '# Filter = V'")
+
+
+def _site(text: TextFile, header: _Header) -> tuple[Site, str]:
+    keys = header.keys
+    coordinates = [k for k in ("SITE_LAT", "SITE_LON", "SITE_ELEV") if k in keys]
+    name = keys.get("SITE_NAME", ("", 0))[0]
+    if coordinates:
+        if len(coordinates) < 3:
+            missing = sorted({"SITE_LAT", "SITE_LON", "SITE_ELEV"} - set(coordinates))
+            raise text.error(keys[coordinates[0]][1], f"the site has {', '.join(coordinates)} but not "
+                                                       f"{', '.join(missing)}; give all three")
+        values = {}
+        for key in coordinates:
+            value, line = keys[key]
+            try:
+                values[key] = float(value)
+            except ValueError:
+                raise text.error(line, f"{key} = {value!r} is not a number") from None
+        try:
+            return Site(name or "unnamed site", values["SITE_LAT"], values["SITE_LON"], values["SITE_ELEV"]), "SITE_* lines"
+        except ValueError as exc:
+            raise text.error(keys["SITE_LAT"][1], str(exc)) from None
+    if name:
+        try:
+            return Site.preset(name), "preset named by SITE_NAME"
+        except KeyError:
+            raise text.error(keys["SITE_NAME"][1], f"SITE_NAME = {name!r} is not a known site and the header has no "
+                                                   "SITE_LAT/SITE_LON/SITE_ELEV lines; add them") from None
+    return DERENIVKA, "assumed Derenivka: no SITE_* lines (ccd_phot computed Az/El for Derenivka)"
+
+
+# -- rows --------------------------------------------------------------------------------------
+def _column(columns: tuple[Column, ...], key: str) -> Column:
+    return next(c for c in columns if c.key == key)
+
+
+def _stamps(text: TextFile, rows: Rows, variant: str) -> np.ndarray:
+    """The rows' stamps as written, int64 ns since 1970 UTC."""
+    if variant == "jd":
+        ns, ok = julian_date_ns(rows["jd"])
+        _first_bad(text, rows, ok, "JD", "jd", "is not a Julian date such as 2460746.2300939")
+        return ns
+    days, ok_date = date_days(rows["date"])
+    _first_bad(text, rows, ok_date, "Date", "date", "is not a date (YYYY-MM-DD)")
+    tod, ok_time = time_of_day_ns(rows["ut"])
+    _first_bad(text, rows, ok_time, "UT", "ut", "is not a time of day (HH:MM:SS.fff)")
+    return days * (86_400 * NS_PER_S) + tod
+
+
+def _first_bad(text: TextFile, rows: Rows, ok: np.ndarray, label: str, key: str, reason: str) -> None:
+    bad = np.flatnonzero(~ok)
+    if len(bad):
+        value = rows[key][bad[0]].decode("utf-8", "replace")
+        raise text.error(int(rows.line[bad[0]]), f"{label} {value!r} {reason}")
+
+
+def _check_increasing(text: TextFile, rows: Rows, stamps_ns: np.ndarray) -> None:
+    step = np.diff(stamps_ns)
+    bad = np.flatnonzero(step <= 0)
+    if len(bad):
+        k = int(bad[0])
+        this, previous = to_datetime64(stamps_ns[[k + 1, k]])
+        kind = "repeats" if step[k] == 0 else "is earlier than"
+        raise text.error(int(rows.line[k + 1]), f"time {str(this)[:23]} {kind} the previous row's "
+                                                f"{str(previous)[:23]} (line {int(rows.line[k])}); rows must be "
+                                                "in time order without repeats")
+
+
+def _check_values(text: TextFile, rows: Rows, columns: tuple[Column, ...]) -> None:
+    """Physical bounds: positive flux and range, elevation within +-90, non-negative errors."""
+    checks = (
+        ("flux", lambda v: v > 0, "is not positive: ccd_phot never writes such a row because its magnitude "
+                                  "would be undefined; remove the row or fix the value"),
+        ("flux_err", lambda v: v >= 0, "is negative; an error must be zero or positive"),
+        ("mag_err", lambda v: v >= 0, "is negative; an error must be zero or positive"),
+        ("el_deg", lambda v: np.abs(v) <= 90, "is not an elevation in degrees (-90..90)"),
+        ("az_deg", lambda v: (v >= -360) & (v <= 360), "is not an azimuth in degrees"),
+        ("range_km", lambda v: v > 0, "is not a positive range"),
+    )
+    for key, good, reason in checks:
+        bad = np.flatnonzero(~good(rows[key]))
+        if len(bad):
+            line = int(rows.line[bad[0]])
+            index = [c.key for c in columns].index(key)
+            token = text.line(line).split()[index]
+            raise text.error(line, f"{_column(columns, key).label} {token} {reason}")
+    median_km = float(np.median(rows["range_km"]))
+    if median_km < _MIN_RANGE_KM:
+        raise text.error(int(rows.line[0]), f"the range column's median is {median_km:g}, so it is not in km as "
+                                            "ccd_phot writes it (even under the label Rg(Mm)); convert it to km")
+
+
+def _ends_with_star(frames: np.ndarray) -> np.ndarray:
+    """(n,) bool: frame names ending with '*' (saturated frames), from the fixed-width bytes."""
+    frames = np.ascontiguousarray(frames)
+    chars = frames.view(np.uint8).reshape(len(frames), frames.dtype.itemsize)
+    length = (chars != 0).sum(axis=1)
+    last = chars[np.arange(len(frames)), np.maximum(length - 1, 0)]
+    return (length > 0) & (last == ord("*"))

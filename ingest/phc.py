@@ -1,0 +1,282 @@
+"""Reader for the Uzhhorod photomultiplier files (``.phc``): B and V at once.
+
+Layout (see docs/formats.md)::
+
+    2025-01-30 17:19:41                  line 1: date and time of the first sample
+    2025-01-30 17:31:25                  line 2: end of the last sample
+    dt=1.0                               sample (integration) time, s
+    COSPAR ID=22011A
+    NORAD ID=51511
+    NAME=COSMOS2553 (Neitron 1)
+    % TLE:                               optional block of '%' lines
+    % 0 COSMOS 2553
+    % 1 51511U ...
+    % 2 51511 ...
+      UT TIME           ImpB-fon     ImpV-fon         FonB       FonV         mB      mV     Az(deg)  El(deg)  Rg(Mm)
+    17:19:41.000000       386.249     567.548  ...
+
+Decisions, with the evidence for each (docs/formats.md has the long form):
+
+* Time stamps are the START of each integration: the writer (phc.pyw) stamps sample ``i`` at
+  ``T0 + i dt`` from the group's start and writes line 2 as ``T0 + n dt``, the end of the last
+  sample; the real file agrees (line 2 is one dt after the last possible stamp). The reader
+  adds ``dt/2`` to reach mid-exposure and records ``time_shift_s``.
+* Only the time of day is written: the date comes from line 1 and a backward step of more
+  than 12 h is a midnight rollover; a smaller backward step is an error.
+* ``Imp-fon`` is the background-subtracted count per sample (the flux); ``Fon`` the sky
+  count subtracted from it. With Poisson statistics for the raw count ``Imp + Fon`` and for a
+  sky measured over one sample, ``flux_err = sqrt(Imp + 2 Fon)`` and
+  ``mag_err = 2.5 / ln 10 * flux_err / Imp``.
+* mB/mV equal to 10 or 12 (13 in one version of the writer) are sentinels for "no
+  measurement"; such rows, and rows whose count is not positive, get ``valid=False`` and NaN
+  magnitudes. They are kept, not rejected: the photometer legitimately records samples with
+  no signal above the sky, and dropping them would hide the gaps.
+* The site is Uzhhorod, but the writer computed Az/El/Rg for the Derenivka coordinates; the
+  columns are kept as written (the file's own magnitudes were reduced with them) and the header
+  says so.
+"""
+from __future__ import annotations
+
+import re
+from types import MappingProxyType
+
+import numpy as np
+
+from ingest import elements
+from ingest.observation import Pass
+from ingest.reduction import fit_reduction, sign_corrected_mag
+from ingest.table import Column, Rows, read_rows
+from ingest.textfile import TextFile
+from ingest.times import NS_PER_DAY, NS_PER_S, time_of_day_ns, to_datetime64
+from raycast.site import UZHHOROD
+
+__all__ = ["PhcReader", "PHC_COLUMNS", "SENTINEL_MAGS", "poisson_flux_err"]
+
+PHC_COLUMNS = (
+    Column("ut", "UT TIME", "text", 32),
+    Column("flux_b", "ImpB-fon"), Column("flux_v", "ImpV-fon"),
+    Column("sky_b", "FonB"), Column("sky_v", "FonV"),
+    Column("mag_b", "mB"), Column("mag_v", "mV"),
+    Column("az_deg", "Az(deg)"), Column("el_deg", "El(deg)"), Column("range_km", "Rg(Mm)"),
+)
+SENTINEL_MAGS = (10.0, 12.0, 13.0)
+_COLUMN_LINE = re.compile(r"^UT\s+TIME\s+ImpB-fon\s+ImpV-fon\s+FonB\s+FonV\s+mB\s+mV\s+Az\(deg\)\s+El\(deg\)\s+Rg\((Mm|Km|km)\)$")
+_FIRST_LINE = re.compile(r"^(\d{4}-\d{2}-\d{2}) (\d{2}:\d{2}:\d{2}(\.\d+)?)$")
+_KEYS = {"dt": "dt", "COSPAR ID": "cospar", "NORAD ID": "norad", "NAME": "name"}
+_HALF_DAY_NS = NS_PER_DAY // 2
+_MAX_HEADER_LINES = 40
+
+
+def poisson_flux_err(flux: np.ndarray, sky: np.ndarray) -> np.ndarray:
+    """1-sigma error of a background-subtracted photon count: sqrt(signal + 2 * sky).
+
+    The raw count of a sample is ``signal + sky`` (Poisson variance equal to itself); the sky
+    subtracted was measured over one sample as well (variance ``sky``).
+
+    Parameters
+    ----------
+    flux, sky : (n,) float
+        Background-subtracted counts and the subtracted sky counts per sample.
+
+    Returns
+    -------
+    (n,) float
+        NaN where the variance would be negative.
+
+    >>> float(poisson_flux_err(np.array([100.0]), np.array([50.0]))[0])
+    14.142135623730951
+    """
+    variance = np.asarray(flux, dtype=float) + 2.0 * np.asarray(sky, dtype=float)
+    with np.errstate(invalid="ignore"):
+        return np.where(variance >= 0, np.sqrt(np.maximum(variance, 0.0)), np.nan)
+
+
+class PhcReader:
+    """Reads a ``.phc`` file into two passes (B, V) sharing one time axis."""
+
+    name = "phc"
+
+    def sniff(self, text: TextFile) -> bool:
+        """True when line 1 is a date and time and a phc column line follows within the header."""
+        if not _FIRST_LINE.match(text.line(1).lstrip("\ufeff").strip()):
+            return False
+        return any(text.line(k).strip().startswith("UT TIME")
+                   for k in range(2, min(text.n_lines, _MAX_HEADER_LINES) + 1))
+
+    def read(self, path) -> tuple[Pass, ...]:
+        """Read `path`; raise `FormatError` with the line and reason when it is not a valid phc file."""
+        return self.parse(TextFile.from_path(path))
+
+    def parse(self, text: TextFile) -> tuple[Pass, ...]:
+        """Build the B and V passes from an already loaded file."""
+        start_ns, first_time = _first_line(text)
+        keys, tle, column_line, notes = _header(text)
+        exposure_s = _positive_float(text, keys, "dt", "dt=1.0")
+        norad = _norad(text, keys, tle)
+        rows = read_rows(text, column_line + 1, PHC_COLUMNS)
+        stamps_ns = _stamps(text, rows, start_ns)
+        shift_s = exposure_s / 2.0
+        time_utc = to_datetime64(stamps_ns + int(round(shift_s * NS_PER_S)))
+        _check_geometry(text, rows)
+
+        info = {key: value for key, (value, _) in keys.items()}
+        info.update(
+            format="phc",
+            first_sample_utc=first_time,
+            file_time_stamps="integration start",
+            az_el_range_site=("Derenivka: the phc writer computed Az(deg), El(deg) and Rg for the Derenivka "
+                              "coordinates (48.5635505 N, 22.453751 E, 231 m) although the photometer is at Uzhhorod"),
+            range_label=text.line(column_line).split()[-1],
+            flux_err_model="sqrt(Imp-fon + 2 Fon): Poisson noise of the raw count and of a one-sample sky",
+        )
+        if text.line(2).strip():
+            info["end_utc"] = text.line(2).strip()
+        for k, note in enumerate(notes):
+            info[f"note_{k + 1}"] = note
+        cospar = keys.get("COSPAR ID", ("", 0))[0] or (elements.tle_cospar(tle) if tle else "")
+        name = keys.get("NAME", ("", 0))[0]
+
+        passes = []
+        for band in ("B", "V"):
+            suffix = band.lower()
+            flux = rows[f"flux_{suffix}"]
+            sky = rows[f"sky_{suffix}"]
+            written = rows[f"mag_{suffix}"]
+            sentinel = np.isin(written, SENTINEL_MAGS)
+            valid = ~sentinel & (flux > 0)
+            flux_err = poisson_flux_err(flux, sky)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                mag_err = np.where(valid, 2.5 / np.log(10.0) * flux_err / flux, np.nan)
+            mag = np.where(valid, written, np.nan)
+            reduction = fit_reduction(mag, flux, exposure_s, rows["el_deg"], rows["range_km"], valid=valid)
+            mag_corrected = (sign_corrected_mag(mag, rows["el_deg"], reduction)
+                             if reduction is not None and reduction.sign_error else None)
+            band_info = dict(info, n_sentinel=int(sentinel.sum()), n_nonpositive_flux=int((flux <= 0).sum()))
+            passes.append(Pass(
+                norad=norad, name=name, band=band, site=UZHHOROD, exposure_s=exposure_s,
+                time_utc=time_utc, mag=mag, mag_err=mag_err, flux=flux, flux_err=flux_err,
+                az_deg=rows["az_deg"], el_deg=rows["el_deg"], range_km=rows["range_km"],
+                saturated=np.zeros(len(rows), dtype=bool), valid=valid,
+                cospar=cospar, tle=tle,
+                time_convention="UTC, mid-exposure", time_shift_s=shift_s,
+                mag_convention=("standard magnitude reduced to 1000 km range: A - 2.5 log10(Imp/dt) - k X "
+                                "- 5 log10(Rg/1000 km) with X and Rg for Derenivka (see header)"),
+                source_name=text.name, source_sha256=text.sha256, source_format=self.name,
+                reduction=reduction, mag_corrected=mag_corrected,
+                header=MappingProxyType(band_info),
+            ))
+        return tuple(passes)
+
+
+def _first_line(text: TextFile) -> tuple[int, str]:
+    """Line 1: the first sample's date and time -> (ns of that date's midnight, the text)."""
+    line = text.line(1).lstrip("\ufeff").strip()
+    match = _FIRST_LINE.match(line)
+    if match is None:
+        raise text.error(1, f"line 1 should be the start date and time (YYYY-MM-DD HH:MM:SS), found {line[:40]!r}")
+    try:
+        midnight = np.datetime64(match.group(1), "D").astype("datetime64[ns]").astype(np.int64)
+    except ValueError:
+        raise text.error(1, f"{match.group(1)!r} is not a calendar date") from None
+    return int(midnight), line
+
+
+def _header(text: TextFile):
+    """Lines 2.. up to the column line: keys, optional TLE block, column line number, other notes."""
+    keys, tle_lines, tle_first, notes = {}, [], None, []
+    for number in range(2, min(text.n_lines, _MAX_HEADER_LINES) + 1):
+        line = text.line(number).strip()
+        if _COLUMN_LINE.match(line):
+            tle = None
+            if tle_lines:
+                try:
+                    tle = elements.parse_tle(tle_lines)
+                except ValueError as exc:
+                    raise text.error(tle_first, f"{exc}; fix the '% TLE:' block") from None
+            return keys, tle, number, notes
+        if line.startswith("UT TIME"):
+            raise text.error(number, f"the column line reads {line!r}; expected 'UT TIME ImpB-fon ImpV-fon FonB "
+                                     "FonV mB mV Az(deg) El(deg) Rg(Mm)'")
+        if line.startswith("%"):
+            body = line.lstrip("%").strip()
+            if body and body != "TLE:":
+                tle_first = tle_first or number
+                tle_lines.append(body)
+            continue
+        key, sep, value = line.partition("=")
+        if sep and key.strip() in _KEYS:
+            keys[key.strip()] = (value.strip(), number)
+        elif line and number > 2:
+            notes.append(line)
+    raise text.error(min(text.n_lines, _MAX_HEADER_LINES), "no 'UT TIME ImpB-fon ...' column line in the header "
+                                                           "and no data rows follow")
+
+
+def _positive_float(text: TextFile, keys: dict, key: str, example: str) -> float:
+    if key not in keys:
+        raise text.error(None, f"the header has no '{key}=' line; add one like '{example}'")
+    value, line = keys[key]
+    try:
+        number = float(value)
+    except ValueError:
+        number = float("nan")
+    if not (np.isfinite(number) and number > 0):
+        raise text.error(line, f"{key}={value!r} is not a positive number of seconds")
+    return number
+
+
+def _norad(text: TextFile, keys: dict, tle) -> int:
+    norad = None
+    if "NORAD ID" in keys:
+        value, line = keys["NORAD ID"]
+        try:
+            norad = int(value)
+        except ValueError:
+            raise text.error(line, f"NORAD ID={value!r} is not a catalogue number") from None
+    if tle is not None:
+        from_tle = elements.tle_norad(tle)
+        if norad is None:
+            norad = from_tle
+        elif from_tle != norad:
+            raise text.error(keys["NORAD ID"][1], f"NORAD ID={norad} but the TLE is for {from_tle}; "
+                                                  "the file mixes two objects")
+    if norad is None or norad <= 0:
+        raise text.error(None, "the header names no object: add 'NORAD ID=<number>' or a '% TLE:' block")
+    return norad
+
+
+def _stamps(text: TextFile, rows: Rows, midnight_ns: int) -> np.ndarray:
+    """Times of day + the date of line 1, rolling over midnight; ns since 1970 UTC."""
+    tod, ok = time_of_day_ns(rows["ut"])
+    bad = np.flatnonzero(~ok)
+    if len(bad):
+        value = rows["ut"][bad[0]].decode("utf-8", "replace")
+        raise text.error(int(rows.line[bad[0]]), f"UT {value!r} is not a time of day (HH:MM:SS.ffffff)")
+    step = np.diff(tod)
+    rollover = step < -_HALF_DAY_NS
+    backwards = np.flatnonzero((step <= 0) & ~rollover)
+    if len(backwards):
+        k = int(backwards[0])
+        this, previous = (rows["ut"][k + 1].decode(), rows["ut"][k].decode())
+        kind = "repeats" if step[k] == 0 else "is earlier than"
+        raise text.error(int(rows.line[k + 1]), f"time {this} {kind} the previous row's {previous} "
+                                                f"(line {int(rows.line[k])}); rows must be in time order "
+                                                "without repeats")
+    day = np.concatenate([[0], np.cumsum(rollover)])
+    return midnight_ns + day * NS_PER_DAY + tod
+
+
+def _check_geometry(text: TextFile, rows: Rows) -> None:
+    keys = [c.key for c in PHC_COLUMNS]
+    for key, good, reason in (
+        ("el_deg", lambda v: np.abs(v) <= 90, "is not an elevation in degrees (-90..90)"),
+        ("range_km", lambda v: v > 0, "is not a positive range"),
+        ("sky_b", lambda v: v >= 0, "is negative; a sky count cannot be"),
+        ("sky_v", lambda v: v >= 0, "is negative; a sky count cannot be"),
+    ):
+        bad = np.flatnonzero(~good(rows[key]))
+        if len(bad):
+            line = int(rows.line[bad[0]])
+            index = keys.index(key)
+            token = text.line(line).split()[index]
+            raise text.error(line, f"{PHC_COLUMNS[index].label} {token} {reason}")

@@ -1,0 +1,74 @@
+"""Format detection and the table of readers: `read_file(path)` is the one entry point.
+
+Detection looks at the content (the header lines), never only at the extension, so a
+``.txt`` copy of a ccd_phot file reads as ccd_phot and a ``.phV`` file holding something else
+is refused with a clear message.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from ingest.ccd_phot import CcdPhotReader
+from ingest.errors import FormatError
+from ingest.observation import Pass
+from ingest.phc import PhcReader
+from ingest.textfile import TextFile
+
+__all__ = ["READERS", "detect_format", "read_file"]
+
+# Name -> reader; detection tries them in this order.
+READERS = {
+    "ccd_phot": CcdPhotReader(),
+    "phc": PhcReader(),
+}
+
+
+def detect_format(text: TextFile) -> str:
+    """Name of the reader (a key of `READERS`) whose format the file's header matches.
+
+    Raises
+    ------
+    FormatError
+        When no reader recognises the header.
+    """
+    for name, reader in READERS.items():
+        if reader.sniff(text):
+            return name
+    first = text.line(1).strip()[:60]
+    raise text.error(1, f"unknown file format (line 1 reads {first!r}); expected a ccd_phot light curve "
+                        "('# TLE:' header and a '# Date UT ...' or '# JD ...' column line) or a photometer "
+                        ".phc file (a date and time on line 1 and a 'UT TIME ImpB-fon ...' column line)")
+
+
+def read_file(path: str | Path, format: str = "auto") -> tuple[Pass, ...]:
+    """Read an observation file into its passes.
+
+    Parameters
+    ----------
+    path : str or Path
+        A ccd_phot ``.phX`` file (one pass) or a photometer ``.phc`` file (two passes, B and V,
+        sharing the time axis).
+    format : str
+        ``"auto"`` (detect from the content) or a key of `READERS`.
+
+    Returns
+    -------
+    tuple of Pass
+
+    Raises
+    ------
+    FormatError
+        ``path:line: reason`` for anything that is not a valid observation file.
+    OSError
+        When the file cannot be opened (missing, a directory, no permission).
+
+    Examples
+    --------
+    >>> from tests.conftest import TOPEX_PHV  # doctest: +SKIP
+    >>> (topex,) = read_file(TOPEX_PHV)       # doctest: +SKIP
+    """
+    if format != "auto" and format not in READERS:
+        raise ValueError(f"format={format!r} is not one of 'auto', {', '.join(map(repr, READERS))}")
+    text = TextFile.from_path(path)
+    name = detect_format(text) if format == "auto" else format
+    return READERS[name].parse(text)
