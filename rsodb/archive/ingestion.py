@@ -169,7 +169,7 @@ def run_ingest(archive: "Archive", paths: list, *, progress: bool = True, worker
                             or since >= max(commit_interval_s, _COMMIT_SPACING * last_commit_cost)):
                 commit_pending()
             if progress:
-                bar.set_postfix(stored=len(ingested), present=len(present), failed=len(failed), refresh=False)
+                bar.set_postfix(committed=len(ingested), present=len(present), failed=len(failed), refresh=False)
         if pending:
             commit_pending()
 

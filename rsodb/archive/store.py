@@ -73,6 +73,8 @@ class Archive:
     path : str or path-like
         The archive directory. A missing or empty directory becomes a new archive; a non-empty
         directory must already be one.
+    create : bool
+        False refuses to create a new archive (for commands that only read).
     durable : bool
         fsync every commit (default). False keeps commits atomic for readers and killed
         processes but not across a power cut; it only saves time on slow disks.
@@ -86,12 +88,13 @@ class Archive:
     >>> archive.passes(norad=22076)[0].detrend().periodogram()         # doctest: +SKIP
     """
 
-    def __init__(self, path, *, durable: bool = True, lock_timeout_s: float | None = 600.0):
+    def __init__(self, path, *, create: bool = True, durable: bool = True,
+                 lock_timeout_s: float | None = 600.0):
         self.path = Path(path)
         self.durable = durable
         self.lock_timeout_s = lock_timeout_s
         self._catalog_cache: dict[Path, tuple[tuple, list[PassSummary], dict]] = {}
-        self._open_or_create()
+        self._open_or_create(create)
         if os.access(self.objects_dir, os.W_OK):
             self._remove_stale_temp_files()
 
@@ -108,7 +111,7 @@ class Archive:
         """The HDF5 file of object `norad` (it may not exist yet)."""
         return self.objects_dir / layout.object_file_name(norad)
 
-    def _open_or_create(self) -> None:
+    def _open_or_create(self, create: bool) -> None:
         marker = self.path / layout.MARKER_NAME
         if self.path.exists() and not self.path.is_dir():
             raise ValueError(f"archive path {str(self.path)!r} is a file; give a directory (new or existing archive)")
@@ -125,6 +128,10 @@ class Archive:
                 )
             self.objects_dir.mkdir(exist_ok=True)
             return
+        if not create:
+            raise ValueError(
+                f"no archive at {str(self.path)!r}; create one with 'rsodb ingest FILES --archive {self.path}'"
+            )
         if self.path.is_dir() and any(self.path.iterdir()):
             raise ValueError(
                 f"{str(self.path)!r} is a non-empty directory without {layout.MARKER_NAME}, so not an rsodb "
@@ -173,15 +180,25 @@ class Archive:
         self._catalog_cache[path] = (key, rows, attrs)
         return rows, attrs
 
-    def catalog(self, *, all_versions: bool = False) -> list[PassSummary]:
-        """One `PassSummary` per pass (current versions only unless `all_versions`), by start time."""
+    def catalog(self, norad: int | None = None, band: str | None = None, site: str | None = None, *,
+                all_versions: bool = False) -> list[PassSummary]:
+        """One `PassSummary` per pass, sorted by start time, without reading any arrays.
+
+        Parameters are those of `passes`.
+        """
+        if norad is not None and not isinstance(norad, (int, np.integer)):
+            raise TypeError(f"norad={norad!r} must be an integer NORAD catalogue number")
+        site_key = None if site is None else site.strip().lower()
         rows = []
-        for norad in self._object_norads():
+        for object_norad in self._object_norads() if norad is None else [int(norad)]:
             try:
-                object_rows, _ = self._object_catalog(norad)
+                object_rows, _ = self._object_catalog(object_norad)
             except FileNotFoundError:
                 continue
-            rows.extend(row for row in object_rows if all_versions or row.is_current)
+            rows.extend(row for row in object_rows
+                        if (all_versions or row.is_current)
+                        and (band is None or row.band == band)
+                        and (site_key is None or row.site.lower() == site_key))
         rows.sort(key=lambda row: (row.start_utc, row.pass_id))
         return rows
 
@@ -204,33 +221,24 @@ class Archive:
         -------
         list of StoredPass
         """
-        if norad is not None and not isinstance(norad, (int, np.integer)):
-            raise TypeError(f"norad={norad!r} must be an integer NORAD catalogue number")
-        site_key = None if site is None else site.strip().lower()
-
-        def wanted(row: PassSummary) -> bool:
-            return ((all_versions or row.is_current)
-                    and (band is None or row.band == band)
-                    and (site_key is None or row.site.lower() == site_key))
-
-        norads = self._object_norads() if norad is None else [int(norad)]
+        wanted: dict[int, set[str]] = {}
+        order = {}
+        for i, row in enumerate(self.catalog(norad, band, site, all_versions=all_versions)):
+            wanted.setdefault(row.norad, set()).add(row.pass_id)
+            order[row.pass_id] = i
         found = []
-        for object_norad in norads:
-            found.extend(self._read_passes(object_norad, wanted))
-        found.sort(key=lambda stored: (stored.start_utc, stored.pass_id))
+        for object_norad, pass_ids in wanted.items():
+            found.extend(self._read_passes(object_norad, pass_ids))
+        found.sort(key=lambda stored: order[stored.pass_id])
         return found
 
-    def _read_passes(self, norad: int, wanted: Callable[[PassSummary], bool]) -> list[StoredPass]:
+    def _read_passes(self, norad: int, pass_ids: set[str]) -> list[StoredPass]:
+        """Read the given passes of one object from its current file (one consistent snapshot)."""
         path = self.object_path(norad)
-        try:
-            file = h5py.File(path, "r")
-        except FileNotFoundError:
-            return []
-        with file:
+        with h5py.File(path, "r") as file:
             layout.check_schema(file, path)
-            rows = layout.read_catalog(file)
-            return [layout.read_pass(file["passes"][row.pass_id], row.superseded_by)
-                    for row in rows if wanted(row)]
+            superseded_by = {row.pass_id: row.superseded_by for row in layout.read_catalog(file)}
+            return [layout.read_pass(file["passes"][pass_id], superseded_by[pass_id]) for pass_id in pass_ids]
 
     def summary(self, pass_id: str) -> PassSummary:
         """The catalog row of a pass; `pass_id` may be a unique prefix of the id.
@@ -265,10 +273,7 @@ class Archive:
     def get(self, pass_id: str) -> StoredPass:
         """The stored pass with this id (a unique prefix is enough)."""
         row = self.summary(pass_id)
-        stored = self._read_passes(row.norad, lambda candidate: candidate.pass_id == row.pass_id)
-        if not stored:  # the catalog we matched against was read before a concurrent commit
-            raise UnknownPassError(f"pass {row.pass_id!r} vanished from {self.object_path(row.norad)}; retry")
-        return stored[0]
+        return self._read_passes(row.norad, {row.pass_id})[0]
 
     def objects(self) -> list[ArchivedObject]:
         """The archive's objects, by NORAD number."""

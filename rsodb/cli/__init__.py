@@ -14,6 +14,10 @@ __all__ = ["main", "COMMAND_MODULES"]
 
 # Order here is the order in `rsodb --help`.
 COMMAND_MODULES = [
+    "ingest",
+    "ls",
+    "show",
+    "export",
 ]
 
 

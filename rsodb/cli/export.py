@@ -1,0 +1,76 @@
+"""``rsodb export PASS --archive DIR --format csv|eossa``: a pass as CSV or EOSSA FITS."""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+from rsodb.cli.archive_options import add_archive_option, fail, open_archive
+
+__all__ = ["register", "run", "FORMATS"]
+
+EXAMPLE = """\
+example:
+  rsodb export 22076-20240730T212240 --archive archive --format csv --out topex.csv
+  rsodb export 22076-20240730T212240 --archive archive --format eossa --out topex.fits
+
+csv: one row per sample (UTC mid-exposure time in ISO 8601, magnitudes, fluxes, Az/El, range,
+flags); written to standard output without --out.
+eossa: the SSA community's FITS photometry exchange format, v3.1.1; --out defaults to
+PASS_ID.eossa.fits in the current directory.
+"""
+
+FORMATS = ("csv", "eossa")
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "export", help="write one pass as CSV or EOSSA FITS",
+        description="Export one stored pass to a file other tools read.",
+        epilog=EXAMPLE, formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("pass_id", metavar="PASS", help="pass id (or a unique prefix)")
+    add_archive_option(parser)
+    parser.add_argument("--format", required=True, choices=FORMATS, help="output format")
+    parser.add_argument("--out", metavar="FILE", help="output file (csv: default standard output)")
+    parser.add_argument("--force", action="store_true", help="overwrite an existing output file")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        stored = open_archive(args).get(args.pass_id)
+        if args.format == "csv":
+            frame = stored.to_pandas()
+            frame.index = frame.index.strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+            if args.out is None:
+                return _to_stdout(frame)
+            out = _free_path(args.out, args.force)
+            frame.to_csv(out)
+        else:
+            from rsodb.eossa import write_eossa
+
+            out = _free_path(args.out or f"{stored.pass_id}.eossa.fits", args.force)
+            write_eossa(stored, out, overwrite=args.force)
+    except (ValueError, LookupError, OSError) as error:
+        return fail("export", error)
+    print(f"wrote {out} ({len(stored)} samples of {stored.pass_id})", file=sys.stderr)
+    return 0
+
+
+def _to_stdout(frame) -> int:
+    try:
+        frame.to_csv(sys.stdout)
+        sys.stdout.flush()
+    except BrokenPipeError:
+        # The reader stopped early (``| head``): not an error. Silence the final flush.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    return 0
+
+
+def _free_path(out: str, force: bool) -> Path:
+    path = Path(out)
+    if path.exists() and not force:
+        raise FileExistsError(f"{out} exists; choose another --out or add --force")
+    return path
