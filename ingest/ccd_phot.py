@@ -52,7 +52,8 @@ _COMMON = (
     Column("x_px", "X"), Column("y_px", "Y"), Column("x_err_px", "Xerr"), Column("y_err_px", "Yerr"),
     Column("flux", "Flux"), Column("flux_err", "Flux_err"), Column("mag", "mag"), Column("mag_err", "mag_err"),
     Column("az_deg", "Az(deg)"), Column("el_deg", "El(deg)"), Column("range_km", "Rg"),
-    Column("frame", "filename", "text", 256),
+    # Frame names are not kept (a '*' after one is read from the bytes, see `_saturated`).
+    Column("frame", "filename", "text", 1),
 )
 UT_COLUMNS = (Column("date", "Date", "text", 16), Column("ut", "UT", "text", 32)) + _COMMON
 JD_COLUMNS = (Column("jd", "JD", "text", 32),) + _COMMON
@@ -162,6 +163,7 @@ class CcdPhotReader:
         site, site_source = _site(text, header)
         flux = rows["flux"]
         mag = rows["mag"]
+        saturated = _saturated(text, rows)
         reduction = fit_reduction(mag, flux, exposure_s, rows["el_deg"], rows["range_km"])
         mag_corrected = None
         if reduction is not None and reduction.sign_error:
@@ -176,7 +178,7 @@ class CcdPhotReader:
             file_time_stamps=stamps,
             band_source=band_source,
             site_source=site_source,
-            n_saturated=int(_ends_with_star(rows["frame"]).sum()),
+            n_saturated=int(saturated.sum()),
         )
         if header.times:
             info["first_frame_utc"] = header.times[0][0]
@@ -193,7 +195,7 @@ class CcdPhotReader:
             time_utc=to_datetime64(time_ns),
             mag=mag, mag_err=rows["mag_err"], flux=flux, flux_err=rows["flux_err"],
             az_deg=rows["az_deg"], el_deg=rows["el_deg"], range_km=rows["range_km"],
-            saturated=_ends_with_star(rows["frame"]), valid=np.isfinite(mag),
+            saturated=saturated, valid=np.isfinite(mag),
             cospar=cospar, tle=header.tle, omm=header.omm,
             time_convention="UTC, mid-exposure", time_shift_s=shift_s,
             mag_convention=("standard magnitude reduced to 1000 km range: A - 2.5 log10(Flux/dt) + c X "
@@ -448,10 +450,17 @@ def _check_values(text: TextFile, rows: Rows, columns: tuple[Column, ...]) -> No
                                             "ccd_phot writes it (even under the label Rg(Mm)); convert it to km")
 
 
-def _ends_with_star(frames: np.ndarray) -> np.ndarray:
-    """(n,) bool: frame names ending with '*' (saturated frames), from the fixed-width bytes."""
-    frames = np.ascontiguousarray(frames)
-    chars = frames.view(np.uint8).reshape(len(frames), frames.dtype.itemsize)
-    length = (chars != 0).sum(axis=1)
-    last = chars[np.arange(len(frames)), np.maximum(length - 1, 0)]
-    return (length > 0) & (last == ord("*"))
+def _saturated(text: TextFile, rows: Rows) -> np.ndarray:
+    """(n,) bool: rows whose frame name (the last column) ends with '*', the saturation mark.
+
+    Found in the bytes: a '*' ending a token can only be the frame name's, since any other
+    column holding one would have failed to parse.
+    """
+    buf = np.frombuffer(text.data, dtype=np.uint8)
+    start = text.offset(int(rows.line[0]))
+    stars = np.flatnonzero(buf[start:] == 42) + start
+    if not len(stars):
+        return np.zeros(len(rows), dtype=bool)
+    after = buf[np.minimum(stars + 1, len(buf) - 1)]
+    ending = stars[(stars + 1 == len(buf)) | (after <= 32)]
+    return np.isin(rows.line, np.searchsorted(text.line_ends, ending) + 1)

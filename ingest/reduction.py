@@ -155,14 +155,17 @@ def fit_reduction(mag, flux, exposure_s, el_deg, range_km, valid=None) -> Reduct
     x, y = x[use], y[use]
     if len(x) < 3 or np.ptp(x) < 1e-3:
         return None
-    design = np.column_stack([np.ones_like(x), x])
-    coef, _, _, _ = np.linalg.lstsq(design, y, rcond=None)
-    residual = y - design @ coef
-    dof = len(x) - 2
-    variance = float(residual @ residual) / dof if dof > 0 else np.nan
-    covariance = variance * np.linalg.inv(design.T @ design)
-    zero_point, term = (float(v) for v in coef)
-    term_err = float(np.sqrt(covariance[1, 1]))
+    # Straight-line least squares in closed form (centred, so well conditioned).
+    n = len(x)
+    x_mean, y_mean = float(x.mean()), float(y.mean())
+    dx = x - x_mean
+    sxx = float(dx @ dx)
+    term = float(dx @ (y - y_mean)) / sxx
+    zero_point = y_mean - term * x_mean
+    residual = y - (zero_point + term * x)
+    variance = float(residual @ residual) / (n - 2) if n > 2 else np.nan
+    term_err = float(np.sqrt(variance / sxx))
+    zero_point_err = float(np.sqrt(variance * (1.0 / n + x_mean**2 / sxx)))
     rms = float(np.sqrt(np.mean(residual**2)))
     sign_error = bool(term > _SIGNIFICANCE * term_err and rms < LAW_RMS_LIMIT_MAG)
     return Reduction(
@@ -171,7 +174,7 @@ def fit_reduction(mag, flux, exposure_s, el_deg, range_km, valid=None) -> Reduct
         rms_mag=rms,
         n_points=int(len(x)),
         sign_error=sign_error,
-        zero_point_err_mag=float(np.sqrt(covariance[0, 0])),
+        zero_point_err_mag=zero_point_err,
         extinction_term_err_mag=term_err,
     )
 

@@ -75,9 +75,9 @@ def read_rows(text: TextFile, first_line: int, columns: tuple[Column, ...]) -> R
         truncated file); a value that is not a number; a NaN or infinite value.
     """
     body_lines = np.arange(first_line, text.n_lines + 1)
-    if first_line > text.n_lines or text.blank[first_line - 1:].all():
-        raise text.error(first_line, "the header is not followed by any data rows")
     body = text.data[text.offset(first_line):]
+    if not body or body.isspace():
+        raise text.error(first_line, "the header is not followed by any data rows")
     try:
         values = np.loadtxt(io.BytesIO(body), dtype=_dtype(columns), comments=None, ndmin=1)
     except ValueError as exc:

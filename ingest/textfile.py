@@ -91,7 +91,7 @@ class TextFile:
     def from_bytes(cls, path: str, data: bytes) -> "TextFile":
         """Check `data` (the whole file) and build its line table; `path` is only for messages."""
         raw_sha256 = hashlib.sha256(data).hexdigest()
-        if not data.strip():
+        if data.isspace():
             raise FormatError(path, None, "the file is empty (only whitespace); an observation file needs a header and data rows")
         if len(data) > MAX_FILE_BYTES:
             raise FormatError(path, None, f"the file is larger than {MAX_FILE_BYTES // 2**20} MiB; check that it is an observation file")
@@ -106,9 +106,12 @@ class TextFile:
         line_starts[0] = 0
         line_starts[1:] = line_ends[:-1] + 1
 
-        bad = np.flatnonzero(~_ALLOWED_CONTROL[buf])
-        if len(bad):
-            offset = int(bad[0])
+        # Control bytes other than TAB, LF, CR (and DEL) mean binary data. Look only at bytes < 32.
+        low = np.flatnonzero(buf < 32)
+        bad = low[~_ALLOWED_CONTROL[buf[low]]]
+        delete = np.flatnonzero(buf == 127)
+        if len(bad) or len(delete):
+            offset = int(min(bad[:1].tolist() + delete[:1].tolist()))
             line = int(np.searchsorted(line_ends, offset)) + 1
             column = offset - int(line_starts[line - 1]) + 1
             raise FormatError(
@@ -127,7 +130,8 @@ class TextFile:
             )
 
         try:
-            data.decode("utf-8")
+            if not data.isascii():
+                data.decode("utf-8")
         except UnicodeDecodeError as exc:
             line = int(np.searchsorted(line_ends, exc.start)) + 1
             column = exc.start - int(line_starts[line - 1]) + 1

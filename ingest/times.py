@@ -33,10 +33,15 @@ _DATE_RE = re.compile(rb"^\d{4}-\d{2}-\d{2}$")
 
 
 def _char_matrix(column: np.ndarray) -> np.ndarray:
-    """(n,) fixed-width bytes ('S') -> (n, width) int64 character codes, zero-padded."""
+    """(n,) fixed-width bytes ('S') -> (n, width) int64 character codes, zero-padded.
+
+    The width is cut to the longest entry, so a wide field costs only what it holds.
+    """
     column = np.ascontiguousarray(column)
-    width = column.dtype.itemsize
-    return column.view(np.uint8).reshape(len(column), width).astype(np.int64)
+    chars = column.view(np.uint8).reshape(len(column), column.dtype.itemsize)
+    used = np.flatnonzero(chars.any(axis=0))
+    width = int(used[-1]) + 1 if len(used) else 0
+    return chars[:, :width].astype(np.int64)
 
 
 def _digits_value(chars: np.ndarray, is_digit: np.ndarray) -> np.ndarray:
@@ -110,7 +115,10 @@ def date_days(column: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     ok : (n,) bool
     """
     # A pass has one or two distinct dates: parse the distinct values only.
-    values, inverse = np.unique(column, return_inverse=True)
+    if len(column) and (column == column[0]).all():
+        values, inverse = column[:1], np.zeros(len(column), dtype=np.intp)
+    else:
+        values, inverse = np.unique(column, return_inverse=True)
     days = np.zeros(len(values), np.int64)
     ok = np.zeros(len(values), bool)
     for k, value in enumerate(values):
