@@ -27,14 +27,13 @@ saturated frame.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import re
 from types import MappingProxyType
 
 import numpy as np
 
 from ingest import elements
-from ingest.errors import FormatError
 from ingest.observation import Pass
 from ingest.reduction import fit_reduction, sign_corrected_mag
 from ingest.table import Column, Rows, read_rows
@@ -127,11 +126,14 @@ class CcdPhotReader:
     name = "ccd_phot"
 
     def sniff(self, text: TextFile) -> bool:
-        """True when the file's header lines and column line are ccd_phot's."""
+        """True when the file opens with ccd_phot's '# TLE:' or '# OMM:' line, or its '#' header
+        lines lead to a ccd_phot column line."""
         for number in range(1, min(text.n_lines, 40) + 1):
             line = text.line(number).lstrip("\ufeff").strip()
             if not line:
                 continue
+            if number == 1 and (line == "# TLE:" or line.startswith("# OMM:")):
+                return True
             tokens = line.lstrip("#").split()
             if tokens[:2] == ["Date", "UT"] or tokens[:1] == ["JD"]:
                 return "Flux" in tokens
@@ -146,7 +148,9 @@ class CcdPhotReader:
     def parse(self, text: TextFile) -> tuple[Pass, ...]:
         """Build the pass from an already loaded file."""
         header = _parse_header(text)
-        columns = UT_COLUMNS if header.variant == "ut" else JD_COLUMNS
+        # Messages name the columns as this file labels them (magV, Rg(Mm), ...).
+        columns = tuple(replace(c, label=label) for c, label in
+                        zip(UT_COLUMNS if header.variant == "ut" else JD_COLUMNS, header.labels))
         rows = read_rows(text, header.column_line + 1, columns)
         exposure_s = _exposure(text, header)
         time_format = header.keys.get("Time_format", (None, None))
@@ -174,7 +178,7 @@ class CcdPhotReader:
             format="ccd_phot",
             time_variant=header.variant,
             columns=" ".join(header.labels),
-            range_label=header.labels[columns.index(_column(columns, "range_km"))],
+            range_label=_column(columns, "range_km").label,
             file_time_stamps=stamps,
             band_source=band_source,
             site_source=site_source,
