@@ -10,12 +10,14 @@ objects grow), and whenever the passes waiting in memory exceed `_MAX_PENDING_BY
 """
 from __future__ import annotations
 
+import copyreg
 import hashlib
 import os
 import time
 from collections import deque
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
+from types import MappingProxyType
 from typing import TYPE_CHECKING, Callable
 
 from ingest.errors import FormatError
@@ -37,9 +39,19 @@ _CHUNK_FILES = 4
 _known_sha256: frozenset[str] = frozenset()
 
 
+def _read_only_mapping(items: dict) -> MappingProxyType:
+    return MappingProxyType(items)
+
+
+def _pickle_mappingproxy(proxy: MappingProxyType):
+    return _read_only_mapping, (dict(proxy),)
+
+
 def _init_worker(known_sha256: frozenset[str]) -> None:
     global _known_sha256
     _known_sha256 = known_sha256
+    # Readers freeze headers as read-only mappings, which pickle cannot send back by default.
+    copyreg.pickle(MappingProxyType, _pickle_mappingproxy)
 
 
 def read_observation_file(path: str, known_sha256: frozenset[str] = frozenset()):
@@ -51,22 +63,28 @@ def read_observation_file(path: str, known_sha256: frozenset[str] = frozenset())
         `passes` is None when the file's SHA-256 is in `known_sha256` (nothing parsed) or when it
         failed; `error` is then a `FormatError` naming file, line and reason.
     """
-    try:
-        with open(path, "rb") as handle:
-            sha = hashlib.sha256(handle.read()).hexdigest()
-    except IsADirectoryError:
-        return path, "", None, FormatError(path, None, "is a directory, not an observation file")
-    except OSError as exc:
-        return path, "", None, FormatError(path, None, f"cannot read ({exc.strerror or exc})")
-    if sha in known_sha256:
-        return path, sha, None, None
+    sha = ""
+    if known_sha256:  # hash first only when a stored file could match (the reader hashes too)
+        try:
+            with open(path, "rb") as handle:
+                sha = hashlib.file_digest(handle, "sha256").hexdigest()
+        except IsADirectoryError:
+            return path, "", None, FormatError(path, None, "is a directory, not an observation file")
+        except OSError as exc:
+            return path, "", None, FormatError(path, None, f"cannot read ({exc.strerror or exc})")
+        if sha in known_sha256:
+            return path, sha, None, None
     from ingest import read_file
 
     try:
         passes = tuple(read_file(path))
     except FormatError as exc:
         return path, sha, None, exc
-    except (ValueError, UnicodeError, OSError) as exc:
+    except IsADirectoryError:
+        return path, sha, None, FormatError(path, None, "is a directory, not an observation file")
+    except OSError as exc:
+        return path, sha, None, FormatError(path, None, f"cannot read ({exc.strerror or exc})")
+    except (ValueError, UnicodeError) as exc:
         return path, sha, None, FormatError(path, None, str(exc) or type(exc).__name__)
     except Exception as exc:  # a reader bug must not stop the batch; it is reported, not hidden
         return path, sha, None, FormatError(
@@ -74,7 +92,7 @@ def read_observation_file(path: str, known_sha256: frozenset[str] = frozenset())
         )
     if not passes:
         return path, sha, None, FormatError(path, None, "the file holds no light curve")
-    return path, sha, passes, None
+    return path, sha or passes[0].source_sha256, passes, None
 
 
 def _read_chunk(paths: list[str]):

@@ -422,10 +422,7 @@ class Archive:
         with replacing(final, durable=self.durable) as tmp:
             if not final.exists():
                 file = h5py.File(tmp, "w")
-                file.attrs["format"] = layout.FORMAT_NAME
-                file.attrs["schema_version"] = layout.SCHEMA_VERSION
-                file.attrs["norad"] = norad
-                file.attrs["time_utc"] = layout.TIME_UNITS
+                layout.write_file_attributes(file, norad)
                 file.create_group("passes")
             elif int(attrs.get("freed_bytes", 0)) > max(_REPACK_MIN_BYTES, _REPACK_FRACTION * final.stat().st_size):
                 file = _repacked(final, tmp)
