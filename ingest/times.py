@@ -19,7 +19,7 @@ import numpy as np
 __all__ = [
     "NS_PER_DAY", "NS_PER_S", "UNIX_EPOCH_JD",
     "time_of_day_ns", "date_days", "julian_date_ns",
-    "to_datetime64", "format_date_time_ms", "format_julian_date", "format_iso_us",
+    "to_datetime64", "format_date_time_ms", "format_iso_us",
 ]
 
 NS_PER_S = 1_000_000_000
@@ -191,14 +191,15 @@ def format_date_time_ms(time_utc: np.ndarray) -> tuple[list[str], list[str]]:
     return [stamp[:10] for stamp in iso], [stamp[11:] for stamp in iso]
 
 
-def format_julian_date(time_utc: np.ndarray, decimals: int = 10) -> list[str]:
-    """Julian dates (UTC) with `decimals` digits, computed in integers (exact to rounding).
+def julian_date_repr(time_utc: np.ndarray) -> list[str]:
+    """Julian dates (UTC) as ccd_phot prints them: the shortest repr of the nearest float64.
+
+    The float64 JD (resolution ~40 us for current dates) is the integer day plus the exact
+    fraction, rounded once, so a JD read from a ccd_phot file prints back as the same digits.
 
     Parameters
     ----------
     time_utc : (n,) datetime64
-    decimals : int
-        Digits after the point; ccd_phot writes 18 characters, i.e. 10 for current dates.
 
     Returns
     -------
@@ -207,17 +208,9 @@ def format_julian_date(time_utc: np.ndarray, decimals: int = 10) -> list[str]:
     ns = np.asarray(time_utc).astype("datetime64[ns]").astype(np.int64)
     since_noon = ns + NS_PER_DAY // 2
     day = np.floor_divide(since_noon, NS_PER_DAY)
-    rest = since_noon - day * NS_PER_DAY
-    unit = NS_PER_DAY // 10**decimals if NS_PER_DAY % 10**decimals == 0 else None
-    if unit is not None:
-        fraction = (rest + unit // 2) // unit
-    else:
-        fraction = np.rint(rest * (10.0**decimals / NS_PER_DAY)).astype(np.int64)
-    carry = fraction >= 10**decimals
-    day = day + carry
-    fraction = np.where(carry, fraction - 10**decimals, fraction)
-    jd_day = (day + _UNIX_EPOCH_JD_DAY).tolist()
-    return [f"{d}.{f:0{decimals}d}" for d, f in zip(jd_day, fraction.tolist())]
+    fraction = (since_noon - day * NS_PER_DAY) / NS_PER_DAY
+    jd = (day + _UNIX_EPOCH_JD_DAY).astype(np.float64) + fraction
+    return list(map(repr, jd.tolist()))
 
 
 def format_iso_us(time_utc: np.datetime64, digits: int = 6) -> str:

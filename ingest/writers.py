@@ -2,8 +2,8 @@
 column widths), used by the sample generator and the benchmarks.
 
 ``read_file(write_ccd_phot(p, path))`` gives back `p`'s arrays to the printed precision
-(times to 1 ms in the UT variant and 8.6 us in the JD variant, magnitudes to 0.001, flux to
-1e-4); a pass whose stamps the reader would shift (before 2023-02 or a ``Time_format`` saying
+(times to 1 ms in the UT variant and ~40 us in the JD variant, which ccd_phot prints as the
+shortest repr of a float64 JD; magnitudes to 0.001, flux to 1e-4); a pass whose stamps the reader would shift (before 2023-02 or a ``Time_format`` saying
 ``start``) is written with the shift undone, so the round trip also returns its times.
 """
 from __future__ import annotations
@@ -18,7 +18,7 @@ import numpy as np
 from ingest.ccd_phot import stamp_offset_s
 from ingest.observation import Pass
 from ingest.phc import SENTINEL_MAGS
-from ingest.times import NS_PER_S, format_date_time_ms, format_iso_us, format_julian_date, to_datetime64
+from ingest.times import NS_PER_S, format_date_time_ms, format_iso_us, julian_date_repr, to_datetime64
 
 __all__ = ["write_ccd_phot", "write_phc", "CCD_PHOT_VARIANTS"]
 
@@ -39,7 +39,8 @@ _PHC_SENTINEL = SENTINEL_MAGS[0]
 
 
 def write_ccd_phot(pass_: Pass, path: str | Path, variant: str = "ut", *, range_unit: str = "Km",
-                   time_format: str | None = None, frame_names: Sequence[str] | None = None) -> Path:
+                   time_format: str | None = None, frame_names: Sequence[str] | None = None,
+                   centroids_px: np.ndarray | None = None) -> Path:
     """Write one pass as a ccd_phot ``.phX`` file.
 
     Parameters
@@ -58,6 +59,9 @@ def write_ccd_phot(pass_: Pass, path: str | Path, variant: str = "ut", *, range_
     frame_names : sequence of str, optional
         The ``filename`` column; default ``<norad>_<HH_MM_SS>Z_<index>.fits``. Saturated
         samples get the trailing ``*`` either way.
+    centroids_px : (n, 4) float, optional
+        The X, Y, Xerr, Yerr columns (the object's centroid on the frame and its error, pixels);
+        zeros by default, as in files re-exported from the lab's database.
 
     Returns
     -------
@@ -89,15 +93,19 @@ def write_ccd_phot(pass_: Pass, path: str | Path, variant: str = "ut", *, range_
     lines.append((_UT_COLUMN_LINE if variant == "ut" else _JD_COLUMN_LINE).format(band=pass_.band, unit=unit_label))
     names = list(frame_names) if frame_names is not None else _frame_names(pass_.norad, stamps)
     names = [name + "*" if saturated else name for name, saturated in zip(names, pass_.saturated.tolist())]
-    zeros = [0.0] * n
-    numeric = [zeros, zeros, zeros, zeros, pass_.flux.tolist(), _finite_or_zero(pass_.flux_err),
+    if centroids_px is None:
+        centroids_px = np.zeros((n, 4))
+    centroids_px = np.asarray(centroids_px, dtype=float)
+    if centroids_px.shape != (n, 4):
+        raise ValueError(f"centroids_px has shape {centroids_px.shape}; give ({n}, 4) columns X, Y, Xerr, Yerr")
+    numeric = [*centroids_px.T.tolist(), pass_.flux.tolist(), _finite_or_zero(pass_.flux_err),
                pass_.mag.tolist(), _finite_or_zero(pass_.mag_err), pass_.az_deg.tolist(), pass_.el_deg.tolist(),
                pass_.range_km.tolist()]
     if variant == "ut":
         dates, times = format_date_time_ms(stamps)
         rows = map(_UT_ROW.__mod__, zip(dates, times, *numeric, names))
     else:
-        rows = map(_JD_ROW.__mod__, zip(format_julian_date(stamps), *numeric, names))
+        rows = map(_JD_ROW.__mod__, zip(julian_date_repr(stamps), *numeric, names))
     _write_atomically(path, "\n".join(lines) + "\n" + "\n".join(rows) + "\n")
     return Path(path)
 
