@@ -1,0 +1,336 @@
+"""The archive: exact round trip of real files, no-op re-ingest, versions, results, layout, errors.
+
+Every comparison of stored arrays is exact: HDF5 stores float64 and int64 bit for bit, so any
+difference is a bug, not rounding.
+"""
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+import ingest
+from ingest.observation import ARRAY_FIELDS
+from rsodb.archive import Archive, StoredPass, UnknownPassError
+from rsodb.archive import layout
+from rsodb.archive.locking import ObjectLock
+from rsodb.archive.synthetic import synthetic_pass
+from tests.conftest import COSMOS2540_PHV, COSMOS2553_PHC, PROJECT_ROOT, REAL_FILES, TOPEX_PHV
+
+
+def assert_same_pass(stored, original) -> None:
+    """Every array bit for bit and every field of `original` equal in `stored`."""
+    for name in ARRAY_FIELDS:
+        np.testing.assert_array_equal(getattr(stored, name), getattr(original, name), err_msg=name)
+    if original.mag_corrected is None:
+        assert stored.mag_corrected is None
+    else:
+        np.testing.assert_array_equal(stored.mag_corrected, original.mag_corrected)
+    for name in ("norad", "name", "band", "site", "exposure_s", "cospar", "tle", "time_convention",
+                 "time_shift_s", "mag_convention", "source_name", "source_sha256", "source_format"):
+        assert getattr(stored, name) == getattr(original, name), name
+    assert (stored.omm is None) == (original.omm is None)
+    if original.reduction is None:
+        assert stored.reduction is None
+    else:
+        for name, value in vars(original.reduction).items():
+            np.testing.assert_equal(getattr(stored.reduction, name), value, err_msg=name)
+    assert dict(stored.header) == json.loads(json.dumps(dict(original.header), default=list))
+
+
+@pytest.fixture
+def real_archive(tmp_path, shared_data):
+    archive = Archive(tmp_path / "archive")
+    report = archive.ingest(REAL_FILES, progress=False, workers=0)
+    assert report.ok, report.summary()
+    return archive
+
+
+def test_real_files_round_trip_exactly(real_archive):
+    originals = [p for path in REAL_FILES for p in ingest.read_file(path)]
+    stored = real_archive.passes()
+    assert len(stored) == len(originals) == 5  # three ccd_phot passes, B and V of the phc file
+    by_key = {(p.source_sha256, p.band): p for p in originals}
+    for item in stored:
+        assert isinstance(item, StoredPass)
+        assert item.version == 1 and item.is_current
+        assert_same_pass(item, by_key[(item.source_sha256, item.band)])
+    starts = [p.start_utc for p in stored]
+    assert starts == sorted(starts)
+
+
+def test_pass_ids_are_readable_and_stable(real_archive, tmp_path):
+    ids = {row.pass_id for row in real_archive.catalog()}
+    assert ids == {
+        "22076-20240730T212240-V-derenivka",
+        "44517-20250130T173650-V-derenivka",
+        "51511-20250311T173120-V-derenivka",
+        "51511-20250130T171941-B-uzhhorod",
+        "51511-20250130T171941-V-uzhhorod",
+    }
+    again = Archive(tmp_path / "again")
+    again.ingest(list(reversed(REAL_FILES)), progress=False, workers=0)
+    assert {row.pass_id for row in again.catalog()} == ids
+
+
+def test_filters_and_prefix_lookup(real_archive):
+    assert [p.norad for p in real_archive.passes(norad=51511)] == [51511, 51511, 51511]
+    assert {p.band for p in real_archive.passes(norad=51511, band="B")} == {"B"}
+    assert len(real_archive.passes(site="UZHHOROD")) == 2
+    assert real_archive.passes(norad=12345) == []
+    assert real_archive.get("44517").pass_id == "44517-20250130T173650-V-derenivka"
+    with pytest.raises(UnknownPassError, match=r"pass id prefix '51511' matches 3 passes .*; give more of the id"):
+        real_archive.get("51511")
+    with pytest.raises(UnknownPassError, match=r"no pass '99999-x' in archive .*; run 'rsodb ls --archive"):
+        real_archive.get("99999-x")
+    with pytest.raises(TypeError, match=r"norad='22076' must be an integer"):
+        real_archive.passes(norad="22076")
+
+
+def test_objects_summary(real_archive):
+    objects = {o.norad: o for o in real_archive.objects()}
+    assert sorted(objects) == [22076, 44517, 51511]
+    cosmos = objects[51511]
+    assert (cosmos.n_passes, cosmos.n_versions, cosmos.bands) == (3, 3, ("B", "V"))
+    assert cosmos.first_utc == np.datetime64("2025-01-30T17:19:41.500", "ns")
+    assert objects[22076].name == "TOPEX/POSEIDON"
+
+
+def test_reingest_is_a_no_op(real_archive):
+    files = sorted(real_archive.objects_dir.glob("*.h5"))
+    before = {path: (path.stat().st_ino, path.stat().st_mtime_ns, path.read_bytes()) for path in files}
+    report = real_archive.ingest(REAL_FILES, progress=False, workers=0)
+    assert report.ok and not report.ingested
+    assert sorted(report.already_present) == sorted(str(path) for path in REAL_FILES)
+    after = {path: (path.stat().st_ino, path.stat().st_mtime_ns, path.read_bytes()) for path in files}
+    assert after == before  # not even rewritten
+
+
+def test_changed_file_becomes_a_new_version(tmp_path, shared_data):
+    source = tmp_path / "in" / TOPEX_PHV.name
+    source.parent.mkdir()
+    shutil.copy(TOPEX_PHV, source)
+    archive = Archive(tmp_path / "archive")
+    archive.ingest([source], progress=False, workers=0)
+    (first,) = archive.passes()
+
+    # The observer re-reduces the file: one magnitude changes, the name stays.
+    lines = source.read_text().splitlines(keepends=True)
+    row = next(i for i, line in enumerate(lines) if not line.startswith("#"))
+    lines[row] = lines[row].replace(" 4.467 ", " 4.567 ", 1)
+    source.write_text("".join(lines))
+    report = archive.ingest([source], progress=False, workers=0)
+    assert [item.pass_ids for item in report.ingested] == [(first.pass_id + "-v2",)]
+    assert report.ingested[0].superseded == (first.pass_id,)
+    assert "new version of 22076-20240730T212240-V-derenivka" in report.summary()
+
+    (current,) = archive.passes()
+    assert (current.version, current.supersedes, current.superseded_by) == (2, first.pass_id, None)
+    assert current.mag[0] == 4.567 and first.mag[0] == 4.467
+    old = archive.get(first.pass_id)  # the old version stays, byte for byte
+    assert old.superseded_by == current.pass_id and not old.is_current
+    assert_same_pass(old, first)
+    assert [p.version for p in archive.passes(all_versions=True)] == [1, 2]
+    assert archive.get("22076-2024").pass_id == current.pass_id  # a prefix names the current version
+
+    # Ingesting the first content again changes nothing: its hash is stored.
+    shutil.copy(TOPEX_PHV, source)
+    assert archive.ingest([source], progress=False, workers=0).already_present == (str(source),)
+
+
+def test_same_observation_under_another_name_is_a_version(tmp_path, shared_data):
+    archive = Archive(tmp_path / "archive")
+    archive.ingest([COSMOS2540_PHV], progress=False, workers=0)
+    renamed = tmp_path / "re-export.phV"
+    renamed.write_text(COSMOS2540_PHV.read_text().replace("2025-01-30 17:41:04.985058", "2025-01-30 17:41:04.985"))
+    report = archive.ingest([renamed], progress=False, workers=0)
+    assert report.ingested[0].pass_ids == ("44517-20250130T173650-V-derenivka-v2",)
+
+
+def test_layout_schema_and_plain_h5py(real_archive):
+    marker = json.loads((real_archive.path / layout.MARKER_NAME).read_text())
+    assert marker["schema_version"] == layout.SCHEMA_VERSION == 1
+    with h5py.File(real_archive.object_path(51511), "r") as file:
+        assert file.attrs["schema_version"] == 1
+        assert file.attrs["norad"] == 51511
+        assert sorted(file["passes"]) == sorted(row.pass_id for row in real_archive.catalog(norad=51511))
+        samples = file["passes/51511-20250130T171941-B-uzhhorod/samples"]
+        assert samples.shape == (692,)
+        assert set(json.loads(file.attrs["sample_units"])) >= set(samples.dtype.names)
+        metadata = json.loads(file["passes/51511-20250130T171941-B-uzhhorod"].attrs["metadata"])
+        assert metadata["site"]["name"] == "Uzhhorod" and metadata["exposure_s"] == 1.0
+
+
+def _doc_snippet() -> str:
+    text = (PROJECT_ROOT / "docs" / "archive.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", text, flags=re.S)
+    (snippet,) = [block for block in blocks if "# reading an archive without rsodb" in block]
+    return snippet
+
+
+def test_documented_snippet_reads_the_archive_with_h5py_and_pandas(real_archive):
+    namespace = {"ARCHIVE": str(real_archive.path)}
+    exec(compile(_doc_snippet(), "docs/archive.md", "exec"), namespace)
+    catalog, samples = namespace["catalog"], namespace["samples"]
+    rows = real_archive.catalog(all_versions=True)
+    assert sorted(catalog["pass_id"]) == sorted(row.pass_id for row in rows)
+    assert catalog["start_utc"].dtype.kind == "M"
+    (topex,) = ingest.read_file(TOPEX_PHV)
+    np.testing.assert_array_equal(samples.index.values, topex.time_utc)
+    np.testing.assert_array_equal(samples["mag"].to_numpy(), topex.mag)
+    np.testing.assert_array_equal(samples["range_km"].to_numpy(), topex.range_km)
+    assert samples["saturated"].dtype == bool
+
+
+class Periods:
+    """A stand-in result with the contract's to_hdf5/from_hdf5 pair."""
+
+    def __init__(self, best_period_s, power):
+        self.best_period_s, self.power = best_period_s, np.asarray(power)
+
+    def to_hdf5(self, group):
+        group.attrs["best_period_s"] = self.best_period_s
+        group.create_dataset("power", data=self.power)
+
+    @classmethod
+    def from_hdf5(cls, group):
+        return cls(float(group.attrs["best_period_s"]), group["power"][()])
+
+
+class Broken:
+    def to_hdf5(self, group):
+        group.create_dataset("half", data=np.arange(10))
+        raise RuntimeError("disk on fire")
+
+
+def test_results_are_stored_atomically(real_archive):
+    pass_id = "22076-20240730T212240-V-derenivka"
+    real_archive.store_result(pass_id, "periods", "lomb-scargle", Periods(10.73, [1.0, 2.0, 3.0]))
+    real_archive.store_result("22076", "fits", "paper", Periods(9.86, [0.5]))
+    loaded = real_archive.load_result(pass_id, "periods", "lomb-scargle", Periods.from_hdf5)
+    assert loaded.best_period_s == 10.73
+    np.testing.assert_array_equal(loaded.power, [1.0, 2.0, 3.0])
+    assert real_archive.result_names(pass_id, "periods") == ["lomb-scargle"]
+    assert real_archive.result_names(pass_id, "fits") == ["paper"]
+    assert real_archive.result_names("44517", "fits") == []
+
+    # Storing under the same name replaces; the pass itself is untouched.
+    real_archive.store_result(pass_id, "periods", "lomb-scargle", Periods(10.5, [7.0]))
+    assert real_archive.load_result(pass_id, "periods", "lomb-scargle", Periods.from_hdf5).best_period_s == 10.5
+    (topex,) = ingest.read_file(TOPEX_PHV)
+    assert_same_pass(real_archive.get(pass_id), topex)
+
+    # A result that fails while writing leaves the object file exactly as it was.
+    path = real_archive.object_path(22076)
+    before = path.read_bytes()
+    with pytest.raises(RuntimeError, match="disk on fire"):
+        real_archive.store_result(pass_id, "fits", "broken", Broken())
+    assert path.read_bytes() == before
+    assert real_archive.result_names(pass_id, "fits") == ["paper"]
+    assert not [name for name in os.listdir(real_archive.objects_dir) if name.endswith(".tmp")]
+
+
+def test_result_arguments_are_checked(real_archive):
+    pass_id = "44517-20250130T173650-V-derenivka"
+    with pytest.raises(ValueError, match=r"result kind 'period' is not one of periods, fits"):
+        real_archive.store_result(pass_id, "period", "x", Periods(1.0, [1]))
+    with pytest.raises(ValueError, match=r"result name '\.\./x' must start with a letter or digit"):
+        real_archive.store_result(pass_id, "fits", "../x", Periods(1.0, [1]))
+    with pytest.raises(TypeError, match=r"list has no to_hdf5\(group\) method"):
+        real_archive.store_result(pass_id, "fits", "x", [1, 2])
+    with pytest.raises(UnknownPassError, match=r"has no periods result named 'nope'; stored: none"):
+        real_archive.load_result(pass_id, "periods", "nope", Periods.from_hdf5)
+
+
+def test_chain_path_is_inside_the_archive(real_archive):
+    path = real_archive.chain_path("44517", "spin-fit")
+    assert path == real_archive.path / "chains" / "44517" / "44517-20250130T173650-V-derenivka" / "spin-fit.h5"
+    assert path.parent.is_dir()
+    with pytest.raises(ValueError, match="result name 'a/b'"):
+        real_archive.chain_path("44517", "a/b")
+
+
+def test_replaced_results_do_not_grow_the_file_forever(real_archive):
+    """Each replacement leaves dead space; past 25% of the file (and 4 MiB) the file is repacked."""
+    pass_id = "44517"
+    payload = np.arange(2**17, dtype=np.float64)  # 1 MiB
+    for k in range(8):
+        # Alternating two names: a replaced result is never the file's last block, whose space
+        # HDF5 would give back by itself.
+        real_archive.store_result(pass_id, "fits", "first", Periods(float(k), payload))
+        real_archive.store_result(pass_id, "fits", "second", Periods(float(k) + 0.5, payload))
+    size_mib = real_archive.object_path(44517).stat().st_size / 2**20
+    # Without repacking the file grows by 2 MiB per round, to 16 MiB. With it: live data (the
+    # pass 0.4 MiB, two results 2 MiB) + at most the 4 MiB of dead space + one round's 2 MiB.
+    assert size_mib < 8.5
+    assert real_archive.load_result(pass_id, "fits", "first", Periods.from_hdf5).best_period_s == 7.0
+    assert real_archive.load_result(pass_id, "fits", "second", Periods.from_hdf5).best_period_s == 7.5
+    (cosmos,) = ingest.read_file(COSMOS2540_PHV)
+    assert_same_pass(real_archive.get(pass_id), cosmos)
+
+
+def test_opening_checks_the_directory(tmp_path):
+    (tmp_path / "notes").mkdir()
+    (tmp_path / "notes" / "todo.txt").write_text("x")
+    with pytest.raises(ValueError, match=r"'.*notes' is a non-empty directory without rsodb-archive.json"):
+        Archive(tmp_path / "notes")
+    with pytest.raises(ValueError, match=r"no archive at '.*missing'; create one with 'rsodb ingest"):
+        Archive(tmp_path / "missing", create=False)
+    assert not (tmp_path / "missing").exists()
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(ValueError, match=r"archive path '.*file' is a file"):
+        Archive(tmp_path / "file")
+    future = Archive(tmp_path / "future")
+    (future.path / layout.MARKER_NAME).write_text(json.dumps({"format": "rsodb archive", "schema_version": 99}))
+    with pytest.raises(ValueError, match=r"has schema_version 99, newer than this rsodb reads \(1\); upgrade rsodb"):
+        Archive(future.path)
+
+
+def test_stale_temp_files_are_removed_unless_their_writer_is_alive(real_archive):
+    stale = real_archive.objects_dir / ".22076.h5.4242.deadbeef.tmp"
+    live = real_archive.objects_dir / ".44517.h5.4343.cafebabe.tmp"
+    stale.write_bytes(b"half an HDF5 file")
+    live.write_bytes(b"a file being written")
+    with ObjectLock(real_archive.objects_dir / layout.lock_file_name(44517)):  # a writer holds 44517
+        reopened = Archive(real_archive.path)
+    assert not stale.exists() and live.exists()
+    assert len(reopened.passes()) == 5  # temp files are never read as passes
+
+
+def test_add_in_memory_passes(tmp_path):
+    rng = np.random.default_rng(7)
+    made = [synthetic_pass(90001, np.datetime64("2025-03-01T18:00:00", "ns"), 300, rng),
+            synthetic_pass(90002, np.datetime64("2025-03-01T19:00:00", "ns"), 300, rng)]
+    archive = Archive(tmp_path / "archive")
+    report = archive.add(made)
+    assert len(report.pass_ids) == 2
+    assert archive.add(made).already_present and not archive.add(made).ingested  # hashed by content
+    for original, stored in zip(made, archive.passes()):
+        np.testing.assert_array_equal(stored.mag, original.mag)
+        np.testing.assert_array_equal(stored.time_utc, original.time_utc)
+        assert len(stored.source_sha256) == 64
+
+
+def test_ingest_arguments_are_checked(tmp_path):
+    archive = Archive(tmp_path / "archive")
+    with pytest.raises(ValueError, match=r"workers=-1 must be a non-negative integer"):
+        archive.ingest([COSMOS2553_PHC], workers=-1)
+    report = archive.ingest([tmp_path / "nothing-here.phV"], progress=False)
+    assert [str(error) for error in report.failed] == [f"{tmp_path / 'nothing-here.phV'}: no such file or directory"]
+
+
+def test_process_pool_gives_the_same_archive(tmp_path, shared_data):
+    """Reading in worker processes must store exactly what reading in-process stores."""
+    serial = Archive(tmp_path / "serial")
+    pooled = Archive(tmp_path / "pooled")
+    serial.ingest(REAL_FILES, progress=False, workers=0)
+    pooled.ingest(REAL_FILES, progress=False, workers=2)
+    for a, b in zip(serial.passes(), pooled.passes()):
+        assert a.pass_id == b.pass_id
+        assert_same_pass(b, a)
