@@ -495,9 +495,14 @@ class _EarthFrames:
         ref_jd = _UNIX_EPOCH_JD + float(day.astype("int64"))  # midnight UTC, an exact x.5
         utc_s = (times - day) / np.timedelta64(1, "s")  # seconds of UTC since that midnight
 
+        # Nodes at both ends of every grid cell that holds a time: a dense pass gets a regular
+        # grid, times scattered over years get two nodes each.
         first_s = float(utc_s.min())
-        n_nodes = max(int(math.ceil((float(utc_s.max()) - first_s) / NODE_SPACING_S)), 1) + 1
-        node_s = first_s + NODE_SPACING_S * np.arange(n_nodes)
+        position = (utc_s - first_s) / NODE_SPACING_S
+        cell = np.floor(position).astype("int64")
+        node_cells = np.unique(np.concatenate([cell, cell + 1]))
+        n_nodes = node_cells.shape[0]
+        node_s = first_s + NODE_SPACING_S * node_cells
         node_tt_s = node_s + _tt_minus_utc_s(ts, ref_jd, node_s)
         t = ts.tt_jd(np.full(n_nodes, ref_jd), node_tt_s / 86400.0)
 
@@ -510,10 +515,9 @@ class _EarthFrames:
 
         # All slowly varying quantities as rows of one table: (9 + 9 + 3 + 1, nodes).
         table = np.concatenate([teme_to_gcrs.reshape(9, n_nodes), q.reshape(9, n_nodes), sun, delta_t_s[None]])
-        position = (utc_s - first_s) / NODE_SPACING_S
-        index = np.minimum(position.astype(int), n_nodes - 2) if n_nodes > 1 else np.zeros(times.shape, int)
-        w = position - index
-        values = table[:, index] * (1.0 - w) + table[:, np.minimum(index + 1, n_nodes - 1)] * w
+        index = np.searchsorted(node_cells, cell)  # the node opening each time's cell
+        w = position - cell
+        values = table[:, index] * (1.0 - w) + table[:, index + 1] * w
         m = times.shape[0]
         ut1_s = utc_s + _tt_minus_utc_s(ts, ref_jd, utc_s) - values[21]
         return cls(
