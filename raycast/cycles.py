@@ -760,7 +760,16 @@ def _bpy_available():
 def _run_in_process(job, on_frame):
     from raycast import _cycles_worker
 
-    return _cycles_worker.render_job(job, on_frame=on_frame)
+    # Blender reports every saved frame on the C-level stdout; keep the caller's console clean.
+    sys.stdout.flush()
+    saved_stdout = os.dup(1)
+    try:
+        with open(os.devnull, "w") as devnull:
+            os.dup2(devnull.fileno(), 1)
+            return _cycles_worker.render_job(job, on_frame=on_frame)
+    finally:
+        os.dup2(saved_stdout, 1)
+        os.close(saved_stdout)
 
 
 def _run_subprocess(job, on_frame):

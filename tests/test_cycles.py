@@ -131,7 +131,7 @@ def plate(material, **normals):
 # Directions over the upper hemisphere, from near-normal to grazing (cos down to 0.2).
 PLATE_SUN = unit([[0.3, 0.2, 1.0], [0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [1.0, 0.3, 0.6], [1.0, 0.0, 0.3], [0.2, 1.0, 0.3]])
 PLATE_OBS = unit([[-0.2, -0.1, 1.0], [0.05, 0.0, 1.0], [0.0, 1.0, 0.2], [-1.0, -0.2, 0.4], [-1.0, 0.0, 0.3], [0.2, -1.0, 0.25]])
-PLATE_SETTINGS = CyclesSettings(samples=64, resolution=128, seed=3, noise_passes=2)
+PLATE_SETTINGS = CyclesSettings(samples=64, resolution=64, seed=3, noise_passes=2)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -282,9 +282,9 @@ def test_lambert_plate_matches_closed_form_per_channel():
     assert result.noise_rel.max() < 1e-3
     assert result.intensity_m2_sr.shape == (6,) and result.frame_seconds.shape == (6,)
     assert 0 < result.seconds_per_frame and 0 < result.seconds_setup < result.seconds_total
-    # square pixels covering the 1 m plate with the default margin of one pixel per side
-    assert result.resolution_px.max() == 130
-    np.testing.assert_allclose(result.pixel_size_m[1], 1.0 / 128, rtol=1e-3)
+    # square pixels covering the 1 m plate seen face-on, with a margin of one pixel per side
+    np.testing.assert_array_equal(result.resolution_px[1], [66, 66])
+    np.testing.assert_allclose(result.pixel_size_m[1], 1.0 / 64, rtol=1e-3)
 
 
 @pytest.mark.cycles
@@ -297,9 +297,10 @@ def test_glossy_plate_matches_ggx_with_height_correlated_masking(roughness):
     # 1e-3: the project's plate criterion; Cycles' scatter here is <= 1e-4 (docs/cycles.md)
     np.testing.assert_allclose(result.intensity_m2_sr, expected, rtol=1e-3)
     if roughness == 0.6:
-        # Cycles does not use the separable G1(i) G1(o): at grazing frames that form is >1% high.
+        # Cycles does not use the separable G1(i) G1(o): at the two grazing frames that form is
+        # 5-7% low, fifty times the tolerance above.
         separable = glossy_plate_intensity(PLATE_SUN, PLATE_OBS, reflectance, roughness, masking="separable")
-        assert (separable[3:] / result.intensity_m2_sr[3:] - 1).min() > 0.01
+        assert (result.intensity_m2_sr[4:] / separable[4:] - 1).min() > 0.03
 
 
 @pytest.mark.cycles
@@ -335,6 +336,7 @@ def test_corner_normals_shade_as_given():
 
 
 @pytest.mark.cycles
+@pytest.mark.slow
 def test_lambert_sphere_matches_facet_sum_and_phase_law():
     vertices, faces = icosphere(5)  # 20480 facets; faceting lowers I/E by 0.03% .. 0.13%
     albedo = 0.5
@@ -399,24 +401,29 @@ def cosmos_directions():
 def test_cosmos_model_reads_with_its_smooth_normals(cosmos):
     assert cosmos.n_triangles == 2184
     assert set(cosmos.material_names) == {"b_cross", "spb_2", "body_2", "spb_2.001", "body_2.001", "body_1"}
-    # the tube (body_1, "s 1") carries vn that differ from its facets; the flat parts do not
+    # the tube ("s 1") carries vn that differ from its facets; the flat ("s 0") panels and
+    # crosses are shaded by their facet normals
     corners = cosmos.vertices_m[cosmos.triangles]
     facet = unit(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]))
     deviation = 1 - np.einsum("tk,tck->tc", facet, cosmos.corner_normals).min(axis=1)
     tube = cosmos.material_index == cosmos.material_names.index("body_1")
     assert (deviation[tube] > 0.01).sum() > 1000
-    assert deviation[~tube].max() < 1e-6
+    flat_parts = np.isin(cosmos.material_index, [cosmos.material_names.index(name)
+                                                 for name in ("b_cross", "spb_2", "spb_2.001")])
+    assert deviation[flat_parts].max() < 1e-12
 
 
 @pytest.mark.cycles
 @pytest.mark.slow
 def test_cosmos_renders_are_reciprocal_and_use_smooth_normals(cosmos):
-    """Helmholtz reciprocity: with a reciprocal BRDF, swapping Sun and observer leaves I/E unchanged,
-    shadows and occlusion included. It holds for the concave paper model only if Cycles' visibility,
-    normals and framing are right in both directions."""
+    """Helmholtz reciprocity: with a reciprocal BRDF and flat shading, swapping Sun and observer
+    leaves I/E unchanged, shadows and occlusion included. It holds for the concave paper model only
+    if Cycles' visibility and framing are right in both directions. (Shading normals that differ
+    from the facets break it: the light comes in by the shading normal, the projected area goes
+    out by the facet normal.)"""
     sun, obs = cosmos_directions()
     settings = CyclesSettings(samples=32, resolution=128, noise_passes=2)
-    diffuse = cosmos.with_material({"blender_node": "Diffuse BSDF", "color": [0.5] * 3})
+    diffuse = cosmos.with_flat_shading().with_material({"blender_node": "Diffuse BSDF", "color": [0.5] * 3})
     forward = render_cycles(diffuse, sun, obs, settings, progress=False)
     backward = render_cycles(diffuse, obs, sun, settings, progress=False)
     # 2e-3: a few times the measured scatter (<= 8e-4 per frame at these settings) plus the Sun
