@@ -15,11 +15,12 @@ Exp_Duration                exposure, s
 Cur_Spec_Filt_Num           1 (the one filter named by SPFNAM1); Cur_ND_Filt_Num: null
 Mag_Exo_Atm, _Unc           exo-atmospheric magnitude at the true range and its 1-sigma error
 Mag_Range_Norm              the same reduced to 1000 km range
-Eph_RA_DE                   topocentric RA/Dec (ICRS, deg) of the ephemeris direction
+Eph_RA_DE                   topocentric RA/Dec (ICRS, deg) of the ephemeris direction, from
+                            the file's Az/El with PyEphem's refraction removed
 Eph_AZ_EL                   azimuth, elevation (deg) from the TLE, as in the source file
                             (elevation includes refraction, 1010 hPa and 15 C)
 Met_RA_DE, Met_AZ_EL        null: the source files carry no measured astrometry
-Sun_AZ_EL                   geometric azimuth and elevation of the Sun (deg)
+Sun_AZ_EL                   apparent azimuth and elevation of the Sun (deg, no refraction)
 Tel_Obj_Range               range, m
 Solar_Phase_Ang             Sun-object-observer angle, deg
 
@@ -32,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from ingest.observation import Pass
+from raycast.refraction import true_elevation_deg
 
 __all__ = ["EOSSA_VERSION", "D_NULL", "J_NULL", "eossa_hdus", "write_eossa", "read_eossa"]
 
@@ -39,9 +41,6 @@ EOSSA_VERSION = "3.1.1"
 D_NULL = -9999.0          # EOSSA null for double columns
 J_NULL = -2147483648      # EOSSA null for 32-bit integer columns
 RANGE_NORM_KM = 1000.0
-# The files' elevations are PyEphem's, which adds refraction for 1010 hPa and 15 C.
-REFRACTION_PRESSURE_HPA = 1010.0
-REFRACTION_TEMPERATURE_C = 15.0
 _JD_UNIX_EPOCH = 2440587.5
 _NS_PER_DAY = 86400e9
 
@@ -58,34 +57,52 @@ def _magnitudes(pass_: Pass) -> tuple[np.ndarray, np.ndarray]:
     return np.where(bad, D_NULL, at_range), np.where(bad, D_NULL, normalised)
 
 
-def _sky_geometry(pass_: Pass) -> dict[str, np.ndarray]:
-    """RA/Dec of the object, Sun Az/El and the solar phase angle, all (n,) in degrees."""
-    import astropy.units as u
-    from astropy.coordinates import AltAz, EarthLocation, ICRS, SkyCoord, get_body
-    from astropy.time import Time
-    from astropy.utils import iers
+def _skyfield_times(time_utc: np.ndarray):
+    """(n,) datetime64[ns] UTC -> skyfield Time (leap seconds handled by the calendar fields)."""
+    from raycast import ephemeris
 
-    with iers.conf.set_temp("auto_download", False), iers.conf.set_temp("auto_max_age", None):
-        location = EarthLocation.from_geodetic(lon=pass_.site.lon_deg * u.deg, lat=pass_.site.lat_deg * u.deg,
-                                               height=pass_.site.elevation_m * u.m)
-        time = Time(pass_.time_utc, scale="utc")
-        observed_frame = AltAz(obstime=time, location=location, pressure=REFRACTION_PRESSURE_HPA * u.hPa,
-                               temperature=REFRACTION_TEMPERATURE_C * u.deg_C, relative_humidity=0.0,
-                               obswl=0.55 * u.micron)
-        geometric_frame = AltAz(obstime=time, location=location)
-        observed = SkyCoord(az=pass_.az_deg * u.deg, alt=pass_.el_deg * u.deg, frame=observed_frame)
-        radec = observed.transform_to(ICRS())
-        target = observed.transform_to(geometric_frame)
-        sun = get_body("sun", time, location).transform_to(geometric_frame)
-    target_km = target.cartesian.xyz.value.T * pass_.range_km[:, None]      # (n, 3) unit * range
-    sun_km = sun.cartesian.xyz.to_value(u.km).T                               # (n, 3)
-    to_sun = sun_km - target_km
-    to_observer = -target_km
-    cos_phase = np.sum(to_sun * to_observer, axis=1) / (
-        np.linalg.norm(to_sun, axis=1) * np.linalg.norm(to_observer, axis=1))
+    days = time_utc.astype("datetime64[D]")
+    years = days.astype("datetime64[Y]")
+    months = days.astype("datetime64[M]")
+    return ephemeris.timescale().utc(
+        years.astype(int) + 1970, (months - years).astype(int) + 1, (days - months).astype(int) + 1,
+        0, 0, (time_utc - days) / np.timedelta64(1, "s"))
+
+
+def _sky_geometry(pass_: Pass) -> dict[str, np.ndarray]:
+    """RA/Dec of the object, Sun Az/El and the solar phase angle, all (n,) in degrees.
+
+    Computed with skyfield and the offline DE421 ephemeris (`raycast.ephemeris`), like the rest
+    of the project's geometry. The object's direction is the file's Az/El with PyEphem's
+    refraction removed, turned from the site's East-North-Up axes into GCRS (ICRS axes): the
+    geometric topocentric direction, as skyfield gives ``(satellite - site).at(t).radec()``.
+    The Sun is its apparent topocentric position.
+    """
+    from skyfield.api import wgs84
+    from skyfield.framelib import itrs
+
+    from raycast import ephemeris
+
+    t = _skyfield_times(pass_.time_utc)
+    az = np.radians(pass_.az_deg)
+    el = np.radians(true_elevation_deg(pass_.el_deg))
+    target_enu = np.stack([np.sin(az) * np.cos(el), np.cos(az) * np.cos(el), np.sin(el)], axis=1)  # (n, 3)
+    target_itrs = target_enu @ pass_.site.enu_itrs.T
+    gcrs_to_itrs = itrs.rotation_at(t)                                       # (3, 3, n)
+    target_gcrs = np.einsum("jin,nj->ni", gcrs_to_itrs, target_itrs)          # transpose applied
+    ra_deg = np.degrees(np.arctan2(target_gcrs[:, 1], target_gcrs[:, 0])) % 360.0
+    dec_deg = np.degrees(np.arcsin(np.clip(target_gcrs[:, 2], -1.0, 1.0)))
+
+    planets = ephemeris.planets()
+    site = wgs84.latlon(pass_.site.lat_deg, pass_.site.lon_deg, elevation_m=pass_.site.elevation_m)
+    sun_alt, sun_az, sun_distance = (planets["earth"] + site).at(t).observe(planets["sun"]).apparent().altaz()
+    sun_enu_km = sun_distance.km[:, None] * np.stack([
+        np.sin(sun_az.radians) * np.cos(sun_alt.radians), np.cos(sun_az.radians) * np.cos(sun_alt.radians),
+        np.sin(sun_alt.radians)], axis=1)
+    to_sun = sun_enu_km - target_enu * pass_.range_km[:, None]
+    cos_phase = np.sum(to_sun * -target_enu, axis=1) / np.linalg.norm(to_sun, axis=1)
     return {
-        "ra_deg": radec.ra.deg, "dec_deg": radec.dec.deg,
-        "sun_az_deg": sun.az.deg, "sun_el_deg": sun.alt.deg,
+        "ra_deg": ra_deg, "dec_deg": dec_deg, "sun_az_deg": sun_az.degrees, "sun_el_deg": sun_alt.degrees,
         "phase_angle_deg": np.degrees(np.arccos(np.clip(cos_phase, -1.0, 1.0))),
     }
 
