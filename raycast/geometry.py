@@ -495,15 +495,16 @@ class _EarthFrames:
         ref_jd = _UNIX_EPOCH_JD + float(day.astype("int64"))  # midnight UTC, an exact x.5
         utc_s = (times - day) / np.timedelta64(1, "s")  # seconds of UTC since that midnight
 
-        # Nodes at both ends of every grid cell that holds a time: a dense pass gets a regular
-        # grid, times scattered over years get two nodes each.
-        first_s = float(utc_s.min())
-        position = (utc_s - first_s) / NODE_SPACING_S
+        # Slow quantities are interpolated on the TT axis, which has no leap seconds. Nodes sit
+        # at both ends of every grid cell that holds a time: a dense pass gets a regular grid,
+        # times scattered over years get two nodes each.
+        tt_s = utc_s + _tt_minus_utc_s(ts, ref_jd, utc_s)  # TT seconds since the TT date ref_jd
+        first_s = float(tt_s.min())
+        position = (tt_s - first_s) / NODE_SPACING_S
         cell = np.floor(position).astype("int64")
         node_cells = np.unique(np.concatenate([cell, cell + 1]))
         n_nodes = node_cells.shape[0]
-        node_s = first_s + NODE_SPACING_S * node_cells
-        node_tt_s = node_s + _tt_minus_utc_s(ts, ref_jd, node_s)
+        node_tt_s = first_s + NODE_SPACING_S * node_cells
         t = ts.tt_jd(np.full(n_nodes, ref_jd), node_tt_s / 86400.0)
 
         delta_t_s = np.asarray(t.delta_t, dtype=float)
@@ -519,7 +520,7 @@ class _EarthFrames:
         w = position - cell
         values = table[:, index] * (1.0 - w) + table[:, index + 1] * w
         m = times.shape[0]
-        ut1_s = utc_s + _tt_minus_utc_s(ts, ref_jd, utc_s) - values[21]
+        ut1_s = tt_s - values[21]
         return cls(
             jd_utc_whole=np.full(m, ref_jd),
             jd_utc_fraction=utc_s / 86400.0,
