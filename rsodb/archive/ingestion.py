@@ -96,7 +96,10 @@ def read_observation_file(path: str, known_sha256: frozenset[str] = frozenset())
 
 
 def _read_chunk(paths: list[str]):
-    return [read_observation_file(path, _known_sha256) for path in paths]
+    # FormatError does not survive pickling (its constructor takes three arguments), so errors
+    # travel back from the worker as their fields.
+    return [(path, sha, passes, None if error is None else (error.path, error.line, error.reason))
+            for path, sha, passes, error in (read_observation_file(path, _known_sha256) for path in paths)]
 
 
 def _auto_workers(n_files: int) -> int:
@@ -122,7 +125,8 @@ def _results(files: list[Path], known: frozenset[str], workers: int):
                 while len(queued) < window and next_chunk < len(chunks):
                     queued.append(pool.submit(_read_chunk, chunks[next_chunk]))
                     next_chunk += 1
-                yield from queued.popleft().result()
+                for path, sha, passes, error in queued.popleft().result():
+                    yield path, sha, passes, None if error is None else FormatError(*error)
         finally:
             for future in queued:
                 future.cancel()
