@@ -425,7 +425,8 @@ def _state_at(satellite: Satellite, site: Site, times: np.ndarray) -> dict:
 
     site_itrs = site.itrs_km[:, None]
     site_gcrs = frames.itrs_to_gcrs(site_itrs)
-    site_vel_gcrs = frames.itrs_to_gcrs(_ERA_RATE_RAD_S * np.array([[-site_itrs[1, 0]], [site_itrs[0, 0]], [0.0]]))
+    # The site turns with the Earth about the ITRS z axis, which in GCRS is Q's last row.
+    site_vel_gcrs = _ERA_RATE_RAD_S * _cross(frames.q[2], site_gcrs)
 
     east, north, up = site.enu_itrs.T @ (sat_itrs - site_itrs)
     az_deg = np.degrees(np.arctan2(east, north)) % 360.0

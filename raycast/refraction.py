@@ -19,7 +19,7 @@ Examples
 --------
 >>> from raycast.refraction import apparent_elevation_deg, true_elevation_deg
 >>> float(apparent_elevation_deg(45.0).round(5))
-45.01607
+45.01584
 >>> float(true_elevation_deg(apparent_elevation_deg(10.0)).round(9))
 10.0
 """
