@@ -431,3 +431,12 @@ def test_site_itrs_matches_skyfield_wgs84():
         up = site.enu_itrs[:, 2]
         np.testing.assert_allclose(np.linalg.norm(site.enu_itrs, axis=0), 1.0, atol=1e-15)
         assert up[2] == pytest.approx(math.sin(math.radians(site.lat_deg)), abs=1e-15)
+
+
+@pytest.mark.parametrize("module", ["geometry", "orbit", "refraction", "shadow", "attitude", "site"])
+def test_docstring_examples_run(module):
+    import doctest
+    import importlib
+
+    result = doctest.testmod(importlib.import_module(f"raycast.{module}"), optionflags=doctest.NORMALIZE_WHITESPACE)
+    assert result.failed == 0 and result.attempted > 0
