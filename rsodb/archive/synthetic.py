@@ -86,30 +86,44 @@ def synthetic_pass(norad: int, start_utc: np.datetime64, n_points: int, rng: np.
 
 
 def write_synthetic_corpus(directory, n_files: int, n_points: int, n_objects: int, *, seed: int = 0,
-                           first_norad: int = 90001, variant: str = "ut") -> list[Path]:
+                           first_norad: int = 90001, variant: str = "ut",
+                           indices: range | None = None) -> list[Path]:
     """Write `n_files` ccd_phot files spread round-robin over `n_objects` objects.
 
-    Passes of one object start a few hours apart from 2025-03-01, so ids never collide. File
-    names follow the lab's ``result_<norad>_<YYYYmmdd>_UT<HHMMSS>.phV`` pattern.
+    Passes of one object start about five hours apart from 2025-03-01, so ids never collide.
+    File names follow the lab's ``result_<norad>_<YYYYmmdd>_UT<HHMMSS>.phV`` pattern. File k
+    depends only on (`seed`, k), so a corpus can be written in parallel pieces.
+
+    Parameters
+    ----------
+    directory : path-like
+    n_files, n_points, n_objects : int
+    seed : int
+    first_norad : int
+        Catalogue number of the first object; objects are numbered consecutively.
+    variant : {"ut", "jd"}
+        Time columns of the files.
+    indices : range, optional
+        Write only these files of the corpus (default: all `n_files`).
 
     Returns
     -------
     list of Path
-        The files, in the order written.
+        The files written, in index order.
     """
     from ingest.writers import write_ccd_phot
 
-    rng = np.random.default_rng(seed)
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     base = np.datetime64("2025-03-01T18:00:00", "ns")
     paths = []
-    for k in range(n_files):
+    for k in range(n_files) if indices is None else indices:
+        rng = np.random.default_rng([seed, k])
         norad = first_norad + k % n_objects
         start = base + np.timedelta64(int((k // n_objects) * 5.3 * 3600e9 + rng.uniform(0, 600e9)), "ns")
         start = start.astype("datetime64[ms]").astype("datetime64[ns]")  # the UT variant prints ms
         pass_ = synthetic_pass(norad, start, n_points, rng)
         stamp = np.datetime_as_string(start, unit="s").replace("-", "").replace(":", "")
-        path = directory / f"result_{norad}_{stamp[:8]}_UT{stamp[9:15]}.ph{pass_.band}"
-        paths.append(write_ccd_phot(pass_, path, variant=variant))
+        paths.append(write_ccd_phot(pass_, directory / f"result_{norad}_{stamp[:8]}_UT{stamp[9:15]}.ph{pass_.band}",
+                                    variant=variant))
     return paths
