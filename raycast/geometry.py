@@ -249,12 +249,12 @@ class PassGeometry:
             The observer.
         time_utc : (n,) datetime64 or astropy.time.Time
             Observed times, UTC, mid-exposure.
-        exposure_s : float
+        exposure_s : float or astropy Quantity
             Exposure time, seconds; 0 disables exposure integration (k = 1).
         n_sub : int, optional
             Sub-samples per exposure; chosen by `choose_n_sub` from `exposure_s` and
             `spin_period_s` when None.
-        spin_period_s : float, optional
+        spin_period_s : float or astropy Quantity, optional
             Expected spin period, used only to choose `n_sub` (default 10 s).
 
         Returns
@@ -275,11 +275,13 @@ class PassGeometry:
         if not isinstance(site, Site):
             raise TypeError(f"site must be a raycast.site.Site, got {type(site).__name__}; use e.g. raycast.site.DERENIVKA")
         times = _as_utc_ns(time_utc)
-        exposure_s = float(exposure_s)
+        exposure_s = _as_seconds(exposure_s)
         if not (math.isfinite(exposure_s) and exposure_s >= 0.0):
             raise ValueError(f"exposure_s={exposure_s!r} must be a finite number of seconds >= 0")
-        if spin_period_s is not None and not (isinstance(spin_period_s, (int, float)) and spin_period_s != 0):
-            raise ValueError(f"spin_period_s={spin_period_s!r} must be a non-zero number of seconds or None")
+        if spin_period_s is not None:
+            spin_period_s = _as_seconds(spin_period_s)
+            if spin_period_s == 0.0 or math.isnan(spin_period_s):
+                raise ValueError(f"spin_period_s={spin_period_s!r} must be a non-zero number of seconds or None")
         if n_sub is None:
             k = choose_n_sub(exposure_s, spin_period_s)
         elif isinstance(n_sub, (int, np.integer)) and not isinstance(n_sub, bool) and 1 <= n_sub <= 4096:
@@ -587,6 +589,16 @@ def _as_utc_ns(time_utc) -> np.ndarray:
             "(the DE421 ephemeris and the leap-second table); give times inside that range"
         )
     return times
+
+
+def _as_seconds(value) -> float:
+    """A float of seconds from a number or an astropy time Quantity (converted once, here)."""
+    if hasattr(value, "to_value"):
+        return float(value.to_value("s"))
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{value!r} is not a number of seconds; give a float or an astropy Quantity in time units") from None
 
 
 def _freeze(obj) -> None:

@@ -392,6 +392,10 @@ def test_astropy_time_pass_and_datetime64_agree(topex_pass):
     a = PassGeometry.compute(TOPEX, DERENIVKA, times)
     b = PassGeometry.compute(TOPEX, DERENIVKA, Time(times, scale="utc"))
     np.testing.assert_allclose(a.sat_itrs_km, b.sat_itrs_km, atol=1e-9)
+    import astropy.units as u
+
+    c = PassGeometry.compute(TOPEX, DERENIVKA, times, exposure_s=200 * u.ms, spin_period_s=0.16 * u.min)
+    assert (c.exposure_s, c.n_sub) == (0.2, 4)
 
 
 def test_from_pass_uses_the_pass_elements_site_times_and_exposure():
@@ -410,6 +414,7 @@ def test_from_pass_uses_the_pass_elements_site_times_and_exposure():
         (dict(time_utc=np.array(["2024-07-30", "NaT"], dtype="datetime64[ns]")), ValueError, "time_utc has 1 NaT values"),
         (dict(time_utc=np.array(["1960-01-01"], dtype="datetime64[ns]")), ValueError, "outside 1972-01-01 .. 2053-10-01"),
         (dict(exposure_s=-0.1), ValueError, "exposure_s=-0.1 must be a finite number of seconds >= 0"),
+        (dict(exposure_s="fast"), ValueError, "'fast' is not a number of seconds"),
         (dict(n_sub=0), ValueError, "n_sub=0 must be a whole number from 1 to 4096"),
         (dict(satellite=TOPEX_TLE), TypeError, "satellite must be a raycast.orbit.Satellite, got tuple"),
         (dict(site=(48.5, 22.4)), TypeError, "site must be a raycast.site.Site, got tuple"),
