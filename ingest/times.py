@@ -7,8 +7,7 @@ line (phc). Everything here works on whole columns (fixed-width byte arrays as r
 mask of the entries that parsed; callers turn the first bad entry into a `FormatError`.
 
 The Julian date is parsed as an integer day and a decimal fraction separately, so the JD
-column keeps its full printed precision (1e-10 day = 8.6 us) instead of the ~40 us of a
-float64 JD.
+column keeps all its printed digits (to the nanosecond) instead of the ~40 us of a float64 JD.
 """
 from __future__ import annotations
 
@@ -19,7 +18,7 @@ import numpy as np
 __all__ = [
     "NS_PER_DAY", "NS_PER_S", "UNIX_EPOCH_JD",
     "time_of_day_ns", "date_days", "julian_date_ns",
-    "to_datetime64", "format_date_time_ms", "format_iso_us",
+    "to_datetime64", "format_date_time_ms", "format_iso_us", "julian_date_repr",
 ]
 
 NS_PER_S = 1_000_000_000
