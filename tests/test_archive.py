@@ -334,3 +334,17 @@ def test_process_pool_gives_the_same_archive(tmp_path, shared_data):
     for a, b in zip(serial.passes(), pooled.passes()):
         assert a.pass_id == b.pass_id
         assert_same_pass(b, a)
+
+
+def test_a_damaged_object_file_is_named(real_archive):
+    real_archive.object_path(44517).write_bytes(b"not HDF5 at all")
+    with pytest.raises(OSError, match=r"44517\.h5 cannot be read as HDF5 .*restore it from a backup"):
+        Archive(real_archive.path).catalog()
+
+
+def test_a_killed_creation_does_not_block_the_next(tmp_path):
+    target = tmp_path / "archive"
+    target.mkdir()
+    (target / f".{layout.MARKER_NAME}.999.abcdef01.tmp").write_text("{")  # killed before its rename
+    archive = Archive(target)
+    assert archive.passes() == [] and (target / layout.MARKER_NAME).is_file()

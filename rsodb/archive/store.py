@@ -132,15 +132,18 @@ class Archive:
             raise ValueError(
                 f"no archive at {str(self.path)!r}; create one with 'rsodb ingest FILES --archive {self.path}'"
             )
-        if self.path.is_dir() and any(self.path.iterdir()):
+        # A creation killed before its marker was renamed into place leaves only its temporary file.
+        leftover = re.compile(rf"^\.{re.escape(layout.MARKER_NAME)}\..*\.tmp$")
+        if self.path.is_dir() and any(not leftover.match(entry.name) for entry in self.path.iterdir()):
             raise ValueError(
                 f"{str(self.path)!r} is a non-empty directory without {layout.MARKER_NAME}, so not an rsodb "
                 "archive; give a new or empty directory"
             )
-        self.objects_dir.mkdir(parents=True, exist_ok=True)
+        self.path.mkdir(parents=True, exist_ok=True)
         info = {"format": layout.FORMAT_NAME, "schema_version": layout.SCHEMA_VERSION, "created_utc": _utc_now()}
         with replacing(marker, durable=self.durable) as tmp:
             tmp.write_text(json.dumps(info, indent=1) + "\n")
+        self.objects_dir.mkdir(exist_ok=True)
 
     def _lock(self, norad: int) -> ObjectLock:
         return ObjectLock(self.objects_dir / layout.lock_file_name(norad), timeout_s=self.lock_timeout_s)
@@ -173,8 +176,7 @@ class Archive:
         cached = self._catalog_cache.get(path)
         if cached is not None and cached[0] == key:
             return cached[1], cached[2]
-        with h5py.File(path, "r") as file:
-            layout.check_schema(file, path)
+        with _open_object(path) as file:
             rows = layout.read_catalog(file)
             attrs = {name: file.attrs[name] for name in file.attrs}
         self._catalog_cache[path] = (key, rows, attrs)
@@ -234,9 +236,7 @@ class Archive:
 
     def _read_passes(self, norad: int, pass_ids: set[str]) -> list[StoredPass]:
         """Read the given passes of one object from its current file (one consistent snapshot)."""
-        path = self.object_path(norad)
-        with h5py.File(path, "r") as file:
-            layout.check_schema(file, path)
+        with _open_object(self.object_path(norad)) as file:
             superseded_by = {row.pass_id: row.superseded_by for row in layout.read_catalog(file)}
             return [layout.read_pass(file["passes"][pass_id], superseded_by[pass_id]) for pass_id in pass_ids]
 
@@ -404,12 +404,9 @@ class Archive:
 
     @staticmethod
     def _read_for_update(final: Path) -> tuple[list[PassSummary], dict]:
-        try:
-            file = h5py.File(final, "r")
-        except FileNotFoundError:
+        if not final.exists():  # under the lock: nobody creates it meanwhile
             return [], {}
-        with file:
-            layout.check_schema(file, final)
+        with _open_object(final) as file:
             return layout.read_catalog(file), {name: file.attrs[name] for name in file.attrs}
 
     @contextmanager
@@ -482,8 +479,7 @@ class Archive:
         """Return ``loader(group)`` for a stored result (the file is closed after `loader` returns)."""
         self._check_result_key(kind, name)
         row = self.summary(pass_id)
-        path = self.object_path(row.norad)
-        with h5py.File(path, "r") as file:
+        with _open_object(self.object_path(row.norad)) as file:
             pass_group = file["passes"][row.pass_id]
             if kind not in pass_group or name not in pass_group[kind]:
                 stored = sorted(pass_group[kind]) if kind in pass_group else []
@@ -497,7 +493,7 @@ class Archive:
         """Names of the stored results of one kind for a pass, sorted."""
         self._check_result_key(kind, "x")
         row = self.summary(pass_id)
-        with h5py.File(self.object_path(row.norad), "r") as file:
+        with _open_object(self.object_path(row.norad)) as file:
             pass_group = file["passes"][row.pass_id]
             return sorted(pass_group[kind]) if kind in pass_group else []
 
@@ -512,6 +508,23 @@ class Archive:
         directory = self.path / layout.CHAINS_DIR / str(row.norad) / row.pass_id
         directory.mkdir(parents=True, exist_ok=True)
         return directory / f"{name}.h5"
+
+
+def _open_object(path: Path) -> h5py.File:
+    """Open an object file read-only, checking its schema; a damaged file is named in the error."""
+    try:
+        file = h5py.File(path, "r")
+    except FileNotFoundError:
+        raise
+    except OSError as exc:
+        raise OSError(f"{path} cannot be read as HDF5 ({exc}); restore it from a backup or move it "
+                      "out of the archive") from None
+    try:
+        layout.check_schema(file, path)
+    except ValueError:
+        file.close()
+        raise
+    return file
 
 
 def _repacked(source: Path, tmp: Path) -> h5py.File:
