@@ -438,15 +438,16 @@ def _state_at(satellite: Satellite, site: Site, times: np.ndarray) -> dict:
     range_km = np.sqrt(np.einsum("im,im->m", los, los))
     range_rate = np.einsum("im,im->m", los, vel_gcrs - site_vel_gcrs) / range_km
     to_sun = frames.sun_gcrs_km - sat_gcrs
+    rows = np.ascontiguousarray  # (m, 3) C-ordered for the renderer's batched products
     return {
-        "sat_gcrs_km": sat_gcrs.T,
-        "sat_itrs_km": sat_itrs.T,
+        "sat_gcrs_km": rows(sat_gcrs.T),
+        "sat_itrs_km": rows(sat_itrs.T),
         "az_deg": az_deg,
         "el_deg": el_deg,
         "range_km": range_km,
         "range_rate_km_s": range_rate,
-        "sun_dir": (to_sun / np.sqrt(np.einsum("im,im->m", to_sun, to_sun))).T,
-        "obs_dir": (-los / range_km).T,
+        "sun_dir": rows((to_sun / np.sqrt(np.einsum("im,im->m", to_sun, to_sun))).T),
+        "obs_dir": rows((-los / range_km).T),
         "sunlit": sunlit_fraction(sat_itrs.T, sun_itrs.T),
         "lvlh_gcrs": _lvlh(sat_gcrs, vel_gcrs),
     }
