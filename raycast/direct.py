@@ -8,9 +8,11 @@ with spacing ``pixel_size_m`` covers the mesh's footprint seen from ``o``. Every
 where ``n_g`` is the geometric normal of the hit triangle turned toward the observer (surfaces
 are two-sided), ``n_s`` the shading normal interpolated from the corner normals at the hit's
 barycentric coordinates (turned to ``n_g``'s side) and ``V`` the Sun visibility from a shadow
-ray. The sum is I/E in m^2/sr. With ``sun_samples > 1`` the BRDF and the shadow ray are
-averaged over that many points of the 0.533 deg solar disk (a Vogel spiral), which gives glints
-of smooth materials their true angular width.
+ray toward the centre of the Sun. The sum is I/E in m^2/sr. For materials with narrow specular
+lobes the BRDF is averaged over points of the 0.533 deg solar disk (a Vogel spiral; how many is
+chosen per material by :func:`sun_samples_for`), which gives glints their true angular width.
+The shadow ray is not spread over the disk: the penumbra it would blur is 0.0093 rad times the
+distance to the occluder, under 1 cm on a body of 10 m, far below any pixel size used here.
 
 The pixel grid of each direction pair is shifted by a low-discrepancy (R2) sub-pixel offset, so
 edge errors of successive frames do not repeat; the result is deterministic.
@@ -33,6 +35,7 @@ __all__ = ["DirectRenderer", "SUN_RADIUS_RAD", "sun_disk_directions", "orthonorm
 SUN_RADIUS_RAD = math.radians(0.533 / 2.0)
 _PLASTIC = 1.32471795724474602596
 _MAX_RAYS_PER_BATCH = 1_500_000
+_TILE = 8
 
 
 def orthonormal_basis(directions):
@@ -81,12 +84,15 @@ class DirectRenderer:
     ----------
     scene : Scene
     pixel_size_m : float, spacing of the orthographic ray grid.
-    sun_samples : int, points of the solar disk per shadow ray and BRDF evaluation.
+    sun_samples : int, optional, points of the solar disk per BRDF evaluation for every
+        material; default per material from ``accuracy_mag`` (:func:`sun_samples_for`).
+    accuracy_mag : float, the accuracy the solar-disk sampling is chosen for.
     """
 
     scene: Scene
     pixel_size_m: float
-    sun_samples: int = 1
+    sun_samples: int | None = None
+    accuracy_mag: float = 0.005
     _state: dict = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self):
@@ -94,7 +100,8 @@ class DirectRenderer:
             raise TypeError(f"scene must be a raycast.scene.Scene, not {type(self.scene).__name__}")
         if not (math.isfinite(self.pixel_size_m) and self.pixel_size_m > 0.0):
             raise ValueError(f"pixel_size_m={self.pixel_size_m!r} must be a positive number of metres")
-        if not (isinstance(self.sun_samples, (int, np.integer)) and self.sun_samples >= 1):
+        if self.sun_samples is not None and not (isinstance(self.sun_samples, (int, np.integer))
+                                                 and self.sun_samples >= 1):
             raise ValueError(f"sun_samples={self.sun_samples!r} must be a positive integer")
 
     # ---------------------------------------------------------------- construction
@@ -108,9 +115,7 @@ class DirectRenderer:
         from the coarse one until two successive results differ by less than
         ``accuracy_mag`` (max over the pilot frames); the finer one is kept. The error of a
         regular grid falls at least linearly with pixel size, so the kept grid's error is at
-        most that last difference. ``sun_samples=None`` chooses 1 when the narrowest specular
-        lobe is so wide that averaging over the solar disk changes its peak by less than a
-        tenth of the accuracy (relative change ~ r_sun**2 / (4 alpha**2)), else 19.
+        most that last difference.
 
         Raises
         ------
@@ -120,19 +125,17 @@ class DirectRenderer:
         sun_body, obs_body = _check_directions(sun_body, obs_body)
         if not (math.isfinite(accuracy_mag) and accuracy_mag > 0.0):
             raise ValueError(f"accuracy_mag={accuracy_mag!r} must be a positive number of magnitudes")
-        if sun_samples is None:
-            sun_samples = sun_samples_for(scene, accuracy_mag)
         mesh = scene.posed()
         footprint = 2.0 * mesh.radius_m
         pixel = footprint / 48.0
-        coarse = cls(scene, pixel, sun_samples).intensity(sun_body, obs_body)
+        coarse = cls(scene, pixel, sun_samples, accuracy_mag).intensity(sun_body, obs_body)
         lit = np.flatnonzero(coarse > 0.0)
         if len(lit) == 0:
-            return cls(scene, pixel, sun_samples)
+            return cls(scene, pixel, sun_samples, accuracy_mag)
         brightest = lit[np.argsort(coarse[lit])[::-1][: n_pilot // 2]]
         spread = lit[np.linspace(0, len(lit) - 1, n_pilot - len(brightest)).astype(int)]
         pilot = np.unique(np.concatenate([brightest, spread]))
-        previous = cls(scene, pixel, sun_samples).intensity(sun_body[pilot], obs_body[pilot])
+        previous = cls(scene, pixel, sun_samples, accuracy_mag).intensity(sun_body[pilot], obs_body[pilot])
         while True:
             pixel /= 2.0
             if (footprint / pixel) ** 2 > max_pixels_per_frame:
@@ -140,12 +143,12 @@ class DirectRenderer:
                     f"accuracy_mag={accuracy_mag} needs rays finer than {2 * pixel:.3g} m "
                     f"(more than max_pixels_per_frame={max_pixels_per_frame}) for {scene.name}: a glint or "
                     "shadow edge is narrower than the sampling; relax accuracy_mag or raise max_pixels_per_frame")
-            current = cls(scene, pixel, sun_samples).intensity(sun_body[pilot], obs_body[pilot])
+            current = cls(scene, pixel, sun_samples, accuracy_mag).intensity(sun_body[pilot], obs_body[pilot])
             both = (current > 0.0) & (previous > 0.0)
             if np.array_equal(current > 0.0, previous > 0.0):
                 change = np.abs(2.5 * np.log10(current[both] / previous[both])).max() if both.any() else 0.0
                 if change < accuracy_mag:
-                    return cls(scene, pixel, sun_samples)
+                    return cls(scene, pixel, sun_samples, accuracy_mag)
             previous = current
 
     # ---------------------------------------------------------------- rendering
@@ -182,91 +185,146 @@ class DirectRenderer:
         start_v = pv.min(axis=0) - offset_v * h
         n_u = np.floor((pu.max(axis=0) - start_u) / h).astype(np.int64) + 1
         n_v = np.floor((pv.max(axis=0) - start_v) / h).astype(np.int64) + 1
-        counts = n_u * n_v
-        sun_dirs = sun_disk_directions(sun_body, self.sun_samples)
-        for batch in _batches(counts, _MAX_RAYS_PER_BATCH):
-            frames = np.repeat(batch, counts[batch])
-            first = np.repeat(np.cumsum(counts[batch]) - counts[batch], counts[batch])
-            local = np.arange(len(frames)) - first
-            iu, iv = local % n_u[frames], local // n_u[frames]
-            cu = start_u[frames] + (iu + 0.5) * h
-            cv = start_v[frames] + (iv + 0.5) * h
-            origins = center + cu[:, None] * u[frames] + cv[:, None] * v[frames] + (radius + 1.0) * obs_body[frames]
-            rays = np.concatenate([origins, -obs_body[frames]], axis=1).astype(np.float32)
+        # Empty-space skipping: the grid is cut into tiles of TILE x TILE pixels and only tiles
+        # touched by some triangle's projected bounding box are cast (the same rays as the full
+        # grid would cast where there is anything to hit).
+        tiles_u = (n_u + _TILE - 1) // _TILE
+        tiles_v = (n_v + _TILE - 1) // _TILE
+        tile_frame, tile_iu, tile_iv = _covered_tiles(mesh, pu, pv, start_u, start_v, h * _TILE, tiles_u, tiles_v)
+        base = (center + (start_u + 0.5 * h)[:, None] * u + (start_v + 0.5 * h)[:, None] * v
+                + (radius + 1.0) * obs_body)
+        step_u, step_v = h * u, h * v
+        # Ray origin of each tile's first pixel, and the pixel pattern within a tile.
+        tile_origin = (base[tile_frame] + (_TILE * tile_iu)[:, None] * step_u[tile_frame]
+                       + (_TILE * tile_iv)[:, None] * step_v[tile_frame]).astype(np.float32)
+        pattern_u, pattern_v = np.meshgrid(np.arange(_TILE), np.arange(_TILE), indexing="ij")
+        pattern_u = pattern_u.reshape(-1).astype(np.float32)
+        pattern_v = pattern_v.reshape(-1).astype(np.float32)
+        step_u32, step_v32 = step_u.astype(np.float32), step_v.astype(np.float32)
+        backward = (-obs_body).astype(np.float32)
+        tiles_per_batch = max(1, _MAX_RAYS_PER_BATCH // _TILE ** 2)
+        for begin in range(0, len(tile_frame), tiles_per_batch):
+            sl = slice(begin, begin + tiles_per_batch)
+            owner = tile_frame[sl]
+            rays = np.empty((len(owner), _TILE ** 2, 6), dtype=np.float32)
+            rays[:, :, :3] = (tile_origin[sl, None, :] + pattern_u[None, :, None] * step_u32[owner][:, None, :]
+                              + pattern_v[None, :, None] * step_v32[owner][:, None, :])
+            rays[:, :, 3:] = backward[owner][:, None, :]
+            rays = rays.reshape(-1, 6)
+            frames = np.repeat(owner, _TILE ** 2)
             hits = scene.cast_rays(rays)
             t_hit = hits["t_hit"].numpy()
-            hit = np.isfinite(t_hit)
-            if not hit.any():
+            hit = np.flatnonzero(np.isfinite(t_hit))
+            if len(hit) == 0:
                 continue
             frames = frames[hit]
             prim = hits["primitive_ids"].numpy()[hit].astype(np.int64)
-            uv = hits["primitive_uvs"].numpy()[hit].astype(float)
-            points = origins[hit] - t_hit[hit, None].astype(float) * obs_body[frames]
-            contribution = self._shade(mesh, scene, frames, prim, uv, points, sun_dirs, obs_body)
+            uv = hits["primitive_uvs"].numpy()[hit]
+            points = rays[hit, :3] + t_hit[hit, None] * rays[hit, 3:]
+            contribution = self._shade(mesh, scene, frames, prim, uv, points, sun_body, obs_body)
             result += np.bincount(frames, weights=contribution, minlength=len(result))
         return result * h * h
 
-    def _shade(self, mesh, scene, frames, prim, uv, points, sun_dirs, obs_body):
+    def _shade(self, mesh, scene, frames, prim, uv, points, sun_body, obs_body):
         """Per-hit f cos V, averaged over the Sun samples, shape (hits,)."""
         wo = obs_body[frames]
         n_geo = mesh.face_normals[prim]
-        facing = np.sign(np.einsum("ij,ij->i", n_geo, wo))
-        facing[facing == 0.0] = 1.0
-        n_geo = n_geo * facing[:, None]
-        bary = np.column_stack([1.0 - uv[:, 0] - uv[:, 1], uv[:, 0], uv[:, 1]])
-        n_shade = np.einsum("ic,icj->ij", bary, mesh.corner_normals[prim])
-        n_shade /= np.linalg.norm(n_shade, axis=1, keepdims=True)
-        n_shade *= np.where(np.einsum("ij,ij->i", n_shade, n_geo) < 0.0, -1.0, 1.0)[:, None]
-        offset = 1e-4 * max(mesh.radius_m, 1.0)
-        materials = mesh.material_index[prim]
+        facing = np.where(np.einsum("ij,ij->i", n_geo, wo) < 0.0, -1.0, 1.0)
+        n_geo *= facing[:, None]
+        # Only smooth-shaded triangles need the barycentric interpolation of corner normals.
+        n_shade = n_geo.copy()
+        smooth = np.flatnonzero(self._state["smooth"][prim])
+        if len(smooth):
+            a, b = uv[smooth, 0, None], uv[smooth, 1, None]
+            corner = mesh.corner_normals[prim[smooth]]
+            interp = (1.0 - a - b) * corner[:, 0] + a * corner[:, 1] + b * corner[:, 2]
+            interp /= np.linalg.norm(interp, axis=1, keepdims=True)
+            interp *= np.where(np.einsum("ij,ij->i", interp, n_geo[smooth]) < 0.0, -1.0, 1.0)[:, None]
+            n_shade[smooth] = interp
+        offset = np.float32(1e-4 * max(mesh.radius_m, 1.0))
+        wi_all = sun_body[frames]
+        lit = np.flatnonzero(np.einsum("ij,ij->i", n_geo, wi_all) > 0.0)
         total = np.zeros(len(frames))
-        for sun_dir in sun_dirs:
-            wi = sun_dir[frames]
-            cos_geo = np.einsum("ij,ij->i", n_geo, wi)
-            cos_shade = np.einsum("ij,ij->i", n_shade, wi)
-            lit = np.flatnonzero((cos_geo > 0.0) & (cos_shade > 0.0))
-            if len(lit) == 0:
-                continue
-            shadow_rays = np.concatenate([points[lit] + offset * n_geo[lit], wi[lit]], axis=1).astype(np.float32)
-            visible = ~scene.test_occlusions(shadow_rays).numpy()
-            lit = lit[visible]
-            value = np.zeros(len(lit))
-            for material in np.unique(materials[lit]):
-                sel = materials[lit] == material
-                idx = lit[sel]
-                value[sel] = mesh.brdfs[material](wi[idx], wo[idx], n_shade[idx]) * cos_shade[idx]
-            total[lit] += value
-        return total / len(sun_dirs)
+        if len(lit) == 0:
+            return total
+        rays = np.empty((len(lit), 6), dtype=np.float32)
+        rays[:, :3] = points[lit] + offset * n_geo[lit]
+        rays[:, 3:] = wi_all[lit]
+        lit = lit[~scene.test_occlusions(rays).numpy()]
+        lit_materials = mesh.material_index[prim[lit]]
+        for material in np.unique(lit_materials):
+            idx = lit[lit_materials == material]
+            normal, wo_m = n_shade[idx], wo[idx]
+            disk = sun_disk_directions(wi_all[idx], self._state["sun_samples"][material])
+            for wi in disk:
+                cos_shade = np.maximum(np.einsum("ij,ij->i", normal, wi), 0.0)
+                total[idx] += mesh.brdfs[material](wi, wo_m, normal) * cos_shade / len(disk)
+        return total
 
     def _prepared(self):
         if "mesh" not in self._state:
             mesh = self.scene.posed()
             self._state["mesh"] = mesh
             self._state["raycaster"] = _open3d_scene(mesh)
+            spread = np.abs(mesh.corner_normals - mesh.face_normals[:, None, :]).max(axis=(1, 2))
+            self._state["smooth"] = spread > 1e-9
+            self._state["sun_samples"] = tuple(
+                sun_samples_for(b, self.accuracy_mag) if self.sun_samples is None else int(self.sun_samples)
+                for b in mesh.brdfs)
         return self._state["mesh"], self._state["raycaster"]
 
 
-def sun_samples_for(scene, accuracy_mag):
-    """Solar-disk samples needed for ``accuracy_mag`` given the scene's narrowest lobe."""
-    widths = [b.lobe_width_rad for b in scene.brdfs if b is not None and b.lobe_width_rad]
-    if not widths:
+def sun_samples_for(brdf, accuracy_mag):
+    """Solar-disk samples the BRDF ``brdf`` needs for ``accuracy_mag``.
+
+    Averaging a specular lobe of width alpha over the solar disk lowers its peak by about
+    r_sun**2 / (4 alpha**2) (second order in the disk radius). One sample (the disk centre)
+    is kept while that is below a tenth of the accuracy; otherwise 7 points of a Vogel spiral,
+    which integrate that quadratic term over the disk to within 5% of itself, or 19 when the
+    effect exceeds ten times the accuracy.
+    """
+    if brdf is None or not brdf.lobe_width_rad:
         return 1
-    relative_effect = SUN_RADIUS_RAD ** 2 / (4.0 * min(widths) ** 2)
-    return 1 if relative_effect < 0.1 * accuracy_mag / 1.0857 else 19
+    relative_effect = SUN_RADIUS_RAD ** 2 / (4.0 * brdf.lobe_width_rad ** 2)
+    tolerance = accuracy_mag / 1.0857
+    if relative_effect < 0.1 * tolerance:
+        return 1
+    return 7 if relative_effect < 10.0 * tolerance else 19
 
 
-def _batches(counts, max_rays):
-    """Split frame indices into consecutive batches of at most ``max_rays`` rays (>= 1 frame)."""
-    batches, current, total = [], [], 0
-    for index, count in enumerate(counts):
-        if current and total + count > max_rays:
-            batches.append(np.asarray(current))
-            current, total = [], 0
-        current.append(index)
-        total += count
-    if current:
-        batches.append(np.asarray(current))
-    return batches
+def _covered_tiles(mesh, pu, pv, start_u, start_v, tile_m, tiles_u, tiles_v):
+    """Tiles of each frame's grid touched by a triangle's projected bounding box.
+
+    Parameters
+    ----------
+    pu, pv : (3 t, m) float, projected vertex coordinates per frame.
+    start_u, start_v : (m,) float, grid origin per frame.
+    tile_m : float, tile side.
+    tiles_u, tiles_v : (m,) int, tiles per frame along each axis.
+
+    Returns
+    -------
+    frame, iu, iv : (k,) int arrays, one entry per covered tile.
+    """
+    m = pu.shape[1]
+    tri_u = pu.reshape(-1, 3, m)
+    tri_v = pv.reshape(-1, 3, m)
+    lo_u = np.floor((tri_u.min(axis=1) - start_u) / tile_m).astype(np.int64)
+    hi_u = np.floor((tri_u.max(axis=1) - start_u) / tile_m).astype(np.int64)
+    lo_v = np.floor((tri_v.min(axis=1) - start_v) / tile_m).astype(np.int64)
+    hi_v = np.floor((tri_v.max(axis=1) - start_v) / tile_m).astype(np.int64)
+    size_u, size_v = int(tiles_u.max()) + 1, int(tiles_v.max()) + 1
+    lo_u, hi_u = np.clip(lo_u, 0, size_u - 1), np.clip(hi_u + 1, 0, size_u)
+    lo_v, hi_v = np.clip(lo_v, 0, size_v - 1), np.clip(hi_v + 1, 0, size_v)
+    # A 2-D difference array per frame: +1/-1 at the box corners, then cumulative sums.
+    cover = np.zeros((m, size_u + 1, size_v + 1), dtype=np.int32)
+    frame = np.broadcast_to(np.arange(m), lo_u.shape)
+    for du, dv, sign in ((lo_u, lo_v, 1), (hi_u, lo_v, -1), (lo_u, hi_v, -1), (hi_u, hi_v, 1)):
+        np.add.at(cover, (frame, du, dv), sign)
+    cover = cover.cumsum(axis=1).cumsum(axis=2)[:, :size_u, :size_v]
+    inside = (np.arange(size_u)[None, :, None] < tiles_u[:, None, None]) & \
+             (np.arange(size_v)[None, None, :] < tiles_v[:, None, None])
+    return np.nonzero((cover > 0) & inside)
 
 
 def _check_directions(sun_body, obs_body):

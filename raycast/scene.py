@@ -11,8 +11,8 @@ their geometry says. Two kinds of degenerate input are handled at construction:
 
 * zero-area triangles carry no area and cannot be hit; they are dropped and listed in ``notes``;
 * overlapping coplanar triangles (e.g. a zero-thickness plate exported as two faces with
-  opposite normals, like ../shared/data/models/plate_1m.obj) make "which face was hit"
-  ambiguous and would count the area twice. They are refused unless ``repair=True``, which keeps one face of each set as
+  opposite normals, like ../shared/data/models/plate_1m.obj) within one part make "which
+  face was hit" ambiguous and would count the area twice. They are refused unless ``repair=True``, which keeps one face of each set as
   a two-sided surface. (Blender Cycles renders such a plate black: each face shadows its twin.)
 
 Code-built parts come from :class:`Part` constructors (``box``, ``cylinder``, ``plate``,
@@ -121,21 +121,16 @@ class Part:
         return cls._flat(name, np.asarray(corners) + np.asarray(center_m, dtype=float), mats)
 
     @classmethod
-    def plate(cls, name, width_m, height_m, material, back_material=None) -> "Part":
-        """A rectangle in the z = 0 plane facing +z, centred on the origin.
+    def plate(cls, name, width_m, height_m, material) -> "Part":
+        """A zero-thickness rectangle in the z = 0 plane, normal +z, centred on the origin.
 
-        With ``back_material`` it is a closed zero-thickness pair of faces instead: the front
-        (+z) in ``material`` and a back face (-z) 1 mm below in ``back_material``.
+        It renders two-sided (both faces in ``material``); for different materials on the two
+        faces use a thin :meth:`box` with ``face_materials``.
         """
         w, h = width_m / 2.0, height_m / 2.0
         quad = np.array([[-w, -h, 0.0], [w, -h, 0.0], [w, h, 0.0], [-w, h, 0.0]])
-        corners = [[quad[0], quad[1], quad[2]], [quad[0], quad[2], quad[3]]]
-        mats = [material, material]
-        if back_material is not None:
-            back = quad - [0.0, 0.0, 1e-3]
-            corners += [[back[0], back[2], back[1]], [back[0], back[3], back[2]]]
-            mats += [back_material, back_material]
-        return cls._flat(name, np.asarray(corners), mats)
+        return cls._flat(name, np.asarray([[quad[0], quad[1], quad[2]], [quad[0], quad[2], quad[3]]]),
+                         [material, material])
 
     @classmethod
     def cylinder(cls, name, radius_m, length_m, material, segments=48, cap_material=None) -> "Part":
@@ -228,6 +223,26 @@ class PosedMesh:
         """(3 t, 3) float: the corners as a vertex array (triangle k uses rows 3k..3k+2)."""
         return self.corners_m.reshape(-1, 3)
 
+    def inner_sides(self) -> np.ndarray:
+        """(t, 2) bool: True for a triangle side (+ then - normal) that faces the inside of a
+        closed, consistently wound part, which no outside ray can reach."""
+        inner = np.zeros((len(self.corners_m), 2), dtype=bool)
+        extent = float(np.ptp(self.vertices_m, axis=0).max()) or 1.0
+        for part in np.unique(self.part_index):
+            tris = np.flatnonzero(self.part_index == part)
+            corners = self.corners_m[tris]
+            _, vertex_id = np.unique(np.round(corners.reshape(-1, 3) / (1e-7 * extent)), axis=0, return_inverse=True)
+            vertex_id = vertex_id.reshape(-1, 3)
+            edges = np.concatenate([vertex_id[:, [0, 1]], vertex_id[:, [1, 2]], vertex_id[:, [2, 0]]])
+            forward = {tuple(e) for e in edges.tolist()}
+            closed = (len(forward) == len(edges)
+                      and all((b, a) in forward for a, b in forward))
+            if not closed:
+                continue
+            volume = np.einsum("ij,ij->i", corners[:, 0], np.cross(corners[:, 1], corners[:, 2])).sum() / 6.0
+            inner[tris, 1 if volume > 0.0 else 0] = True
+        return inner
+
     @property
     def center_m(self) -> np.ndarray:
         return 0.5 * (self.vertices_m.min(axis=0) + self.vertices_m.max(axis=0))
@@ -314,7 +329,7 @@ class Scene:
         if degenerate.any():
             notes.append(f"dropped {int(degenerate.sum())} zero-area triangle(s)")
         keep = ~degenerate
-        twins = _coincident_sets(corners, keep, extent)
+        twins = _coincident_sets(corners, keep, extent, part_index)
         if twins:
             if not repair:
                 listed = "; ".join("faces " + ", ".join(map(str, group)) for group in twins[:3])
@@ -449,8 +464,10 @@ class Scene:
                 f"materials={list(self.material_names)}, parameters={dict(self.parameters)})")
 
 
-def _coincident_sets(corners, keep, extent):
-    """Groups of kept triangles that overlap coplanar (same plane, either facing) triangles.
+def _coincident_sets(corners, keep, extent, part_index):
+    """Groups of kept triangles that overlap coplanar (same plane, either facing) triangles of
+    the same part. (Faces of different parts that touch, like two boxes bolted together, are
+    assembly contacts and hide each other; they are left alone.)
 
     Returns a list of index tuples: the first triangle of each group is the one kept by a
     repair, the others overlap it. Overlap is tested at three interior points of each
@@ -464,7 +481,8 @@ def _coincident_sets(corners, keep, extent):
     lead = np.take_along_axis(normal, np.argmax(np.abs(normal), axis=1)[:, None], axis=1)
     canon = normal * np.sign(lead)
     offset = np.einsum("ij,ij->i", canon, tri[:, 0])
-    key = np.column_stack([np.round(canon * 1e5), np.round(offset / (1e-5 * extent))]).astype(np.int64)
+    key = np.column_stack([part_index[indices], np.round(canon * 1e5),
+                           np.round(offset / (1e-5 * extent))]).astype(np.int64)
     _, plane_id = np.unique(key, axis=0, return_inverse=True)
     plane_id = plane_id.reshape(-1)
     groups = {}

@@ -1,0 +1,399 @@
+"""The fast path: precomputed surface elements and visibility, exact BRDFs at run time.
+
+For a rigid body the brightness depends only on the body-frame Sun and observer directions.
+:meth:`SceneCache.build` samples the surface once into *elements* (points with an area, a
+material, a geometric and an interpolated shading normal, on one side of a triangle) and
+precomputes, for the elements that can be shadowed at all, their visibility over a grid of
+directions. At run time
+
+    I/E = sum_e A_e f_e(s, o) max(n_s . s, 0) [n_g . s > 0] max(n_g . o, 0) V_e(s) V_e(o)
+
+with V bilinearly interpolated on the direction grid and f evaluated analytically, so glints
+keep their exact shape (no brightness table is interpolated across a glint). This is the same
+integral the direct renderer estimates pixel by pixel (A (n_g . o) is an element's projected
+area).
+
+What is precomputed
+-------------------
+* A triangle side is *exposed* when no vertex of the mesh lies above its plane: nothing can
+  shadow or hide it (every face of a convex part alone is exposed), so it needs no visibility
+  and all its elements with the same normal and material merge into one (exactly).
+* The inner sides of closed, consistently wound parts are skipped.
+* Sides that are not exposed are cut into elements no larger than ``element_size_m``; each
+  element's visibility is found by one ray per grid direction of its upper hemisphere
+  (Open3D ``test_occlusions``). Elements that are never visible (the inner side of a closed
+  part) are dropped; those never blocked are treated as exposed.
+* Smooth-shaded triangles are cut finely enough that the shading normal varies by at most
+  ``normal_step_deg`` within an element (a fraction of the narrowest specular lobe).
+* The direction grid is an equal-angle cube map: 6 faces of (N + 1)**2 directions, about
+  90/N deg apart, ``N = grid_size``.
+* Articulations (e.g. TOPEX's ``panel_pitch_deg``) are an extra axis: ``articulation_grid``
+  builds one element set per value and :meth:`intensity` interpolates linearly between the
+  two nearest values.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import math
+import time
+
+import numpy as np
+
+from raycast.direct import _check_directions, _open3d_scene, sun_disk_directions, sun_samples_for
+from raycast.scene import Scene
+
+__all__ = ["SceneCache", "cube_grid_directions", "cube_grid_weights"]
+
+_MAX_RAYS_PER_BATCH = 2_000_000
+
+
+def cube_grid_directions(grid_size):
+    """Unit directions of the equal-angle cube map, shape (6 (N + 1)**2, 3)."""
+    n = grid_size
+    angle = np.linspace(-math.pi / 4.0, math.pi / 4.0, n + 1)
+    a, b = np.meshgrid(np.tan(angle), np.tan(angle), indexing="ij")
+    faces = []
+    for axis in range(3):
+        for sign in (1.0, -1.0):
+            d = np.zeros(a.shape + (3,))
+            d[..., axis] = sign
+            d[..., (axis + 1) % 3] = a
+            d[..., (axis + 2) % 3] = b
+            faces.append(d.reshape(-1, 3))
+    directions = np.concatenate(faces)
+    return directions / np.linalg.norm(directions, axis=1, keepdims=True)
+
+
+def cube_grid_weights(directions, grid_size):
+    """Bilinear interpolation of the cube map at ``directions`` (m, 3).
+
+    Returns
+    -------
+    index : (m, 4) int, grid direction indices.
+    weight : (m, 4) float, weights summing to 1.
+    """
+    n = grid_size
+    d = np.asarray(directions, dtype=float)
+    axis = np.argmax(np.abs(d), axis=1)
+    rows = np.arange(len(d))
+    major = d[rows, axis]
+    face = 2 * axis + (major < 0.0)
+    a = d[rows, (axis + 1) % 3] / np.abs(major)
+    b = d[rows, (axis + 2) % 3] / np.abs(major)
+    fa = (np.arctan(a) + math.pi / 4.0) / (math.pi / 2.0) * n
+    fb = (np.arctan(b) + math.pi / 4.0) / (math.pi / 2.0) * n
+    ia = np.clip(np.floor(fa).astype(np.int64), 0, n - 1)
+    ib = np.clip(np.floor(fb).astype(np.int64), 0, n - 1)
+    ta, tb = np.clip(fa - ia, 0.0, 1.0), np.clip(fb - ib, 0.0, 1.0)
+    base = face * (n + 1) ** 2
+    index = np.stack([base + ia * (n + 1) + ib, base + (ia + 1) * (n + 1) + ib,
+                      base + ia * (n + 1) + ib + 1, base + (ia + 1) * (n + 1) + ib + 1], axis=1)
+    weight = np.stack([(1 - ta) * (1 - tb), ta * (1 - tb), (1 - ta) * tb, ta * tb], axis=1)
+    return index, weight
+
+
+def _subdivision_template(level):
+    """Barycentric centroids (level**2, 3) of the equal sub-triangles of a triangle cut ``level`` times."""
+    up = [((3 * i + 1) / (3.0 * level), (3 * j + 1) / (3.0 * level))
+          for i in range(level) for j in range(level - i)]
+    down = [((3 * i + 2) / (3.0 * level), (3 * j + 2) / (3.0 * level))
+            for i in range(level - 1) for j in range(level - 1 - i)]
+    ab = np.asarray(up + down)
+    return np.column_stack([1.0 - ab.sum(axis=1), ab])
+
+
+@dataclass(frozen=True, eq=False)
+class _Pose:
+    """Elements of one articulation pose."""
+
+    normal_shade: np.ndarray    # (g, 3) per group
+    normal_geo: np.ndarray      # (g, 3) per group
+    material: np.ndarray        # (g,)
+    area_exposed: np.ndarray    # (g,) merged area of exposed elements
+    vis_t: np.ndarray           # (d, e) uint8 visibility of occludable elements, direction-major
+    area_occluded: np.ndarray   # (e,) float32
+    starts: np.ndarray          # (k,) reduceat starts of occludable elements per group
+    occluded_groups: np.ndarray  # (k,) group of each segment
+    n_elements: int
+    n_rays: int
+    material_blocks: tuple      # (material, first group, end group) per material
+
+
+@dataclass(frozen=True, eq=False)
+class SceneCache:
+    """Precomputed elements and visibility of a scene; :meth:`intensity` is the fast renderer.
+
+    Build with :meth:`build`. Attributes describe the settings and the one-off cost.
+    """
+
+    scene: Scene
+    poses: tuple
+    parameter: str | None
+    parameter_values: np.ndarray
+    grid_size: int
+    element_size_m: float
+    normal_step_deg: float
+    sun_samples: tuple
+    precompute_s: float
+    _grid: dict = field(default_factory=dict, repr=False)
+
+    @classmethod
+    def build(cls, scene, accuracy_mag=0.01, element_size_m=None, normal_step_deg=None, grid_size=32,
+              articulation_grid=None, sun_samples=None, progress=False) -> "SceneCache":
+        """Precompute the elements and visibility of ``scene``.
+
+        Parameters
+        ----------
+        scene : Scene
+        accuracy_mag : float, used for the defaults below.
+        element_size_m : float, optional, largest element on shadowable sides
+            (default: the mesh radius / 40).
+        normal_step_deg : float, optional, largest shading-normal change within an element of
+            smooth-shaded triangles (default per material: half its specular lobe width alpha,
+            between 0.5 and 3 deg; 5 deg for diffuse materials).
+        grid_size : int, cube-map resolution N (directions about 90/N deg apart).
+        articulation_grid : dict, optional, ``{parameter: values}`` for one articulation parameter.
+        sun_samples : int, optional, solar-disk samples in the BRDF of every material (default
+            per material from its lobe width, see :func:`raycast.direct.sun_samples_for`).
+        progress : bool, show a progress bar over the visibility rays.
+        """
+        if not isinstance(scene, Scene):
+            raise TypeError(f"scene must be a raycast.scene.Scene, not {type(scene).__name__}")
+        if not (isinstance(grid_size, (int, np.integer)) and 4 <= grid_size <= 256):
+            raise ValueError(f"grid_size={grid_size!r} must be an integer in [4, 256]")
+        start = time.perf_counter()
+        mesh = scene.posed()
+        if element_size_m is None:
+            element_size_m = mesh.radius_m / 40.0
+        if not (math.isfinite(element_size_m) and element_size_m > 0.0):
+            raise ValueError(f"element_size_m={element_size_m!r} must be a positive number of metres")
+        sun_samples = tuple(sun_samples_for(b, accuracy_mag) if sun_samples is None else int(sun_samples)
+                            for b in scene.brdfs)
+        parameter, values = None, np.zeros(0)
+        if articulation_grid:
+            if len(articulation_grid) != 1:
+                raise ValueError(f"articulation_grid={articulation_grid!r} must name exactly one parameter")
+            parameter, raw = next(iter(articulation_grid.items()))
+            values = np.unique(np.asarray(raw, dtype=float))
+            if len(values) < 1 or not np.all(np.isfinite(values)):
+                raise ValueError(f"articulation_grid[{parameter!r}] must hold finite values")
+            scenes = [scene.with_parameters(**{parameter: v}) for v in values]
+        else:
+            scenes = [scene]
+        directions = cube_grid_directions(grid_size)
+        steps = np.array([_normal_step_rad(b, normal_step_deg) for b in scene.brdfs])
+        poses = tuple(_build_pose(s, directions, element_size_m, steps, progress) for s in scenes)
+        return cls(scene, poses, parameter, values, grid_size, float(element_size_m),
+                   float(np.degrees(steps.min())), sun_samples, time.perf_counter() - start)
+
+    # ------------------------------------------------------------------ run time
+    def intensity(self, sun_body, obs_body, **parameters):
+        """I/E in m^2/sr for each direction pair.
+
+        Parameters
+        ----------
+        sun_body : (m, 3) float, unit vectors toward the Sun, body frame.
+        obs_body : (m, 3) float, unit vectors toward the observer, body frame.
+        **parameters : the articulation parameter this cache was built over, e.g.
+            ``panel_pitch_deg=14``; other parameters must equal the scene's.
+
+        Returns
+        -------
+        (m,) float
+        """
+        sun_body, obs_body = _check_directions(sun_body, obs_body)
+        for key, value in parameters.items():
+            if key != self.parameter and float(value) != float(self.scene.parameters.get(key, math.nan)):
+                raise ValueError(
+                    f"this cache was built for {key}={self.scene.parameters.get(key)!r} only; rebuild it with "
+                    f"articulation_grid={{{key!r}: [...]}} to vary {key}")
+        if self.parameter is None:
+            return self._pose_intensity(self.poses[0], sun_body, obs_body)
+        value = float(parameters.get(self.parameter, self.scene.parameters[self.parameter]))
+        grid = self.parameter_values
+        if not grid[0] - 1e-9 <= value <= grid[-1] + 1e-9:
+            raise ValueError(f"{self.parameter}={value} is outside the cached range [{grid[0]}, {grid[-1]}]; "
+                             "rebuild the cache with a wider articulation_grid")
+        if len(grid) == 1:
+            return self._pose_intensity(self.poses[0], sun_body, obs_body)
+        upper = int(np.clip(np.searchsorted(grid, value), 1, len(grid) - 1))
+        t = (value - grid[upper - 1]) / (grid[upper] - grid[upper - 1])
+        low = self._pose_intensity(self.poses[upper - 1], sun_body, obs_body) if t < 1.0 else 0.0
+        high = self._pose_intensity(self.poses[upper], sun_body, obs_body) if t > 0.0 else 0.0
+        return (1.0 - t) * low + t * high
+
+    def _pose_intensity(self, pose, sun, obs):
+        m = len(sun)
+        weight = np.broadcast_to(pose.area_exposed, (m, len(pose.area_exposed))).copy()
+        if pose.vis_t.shape[1]:
+            idx_s, w_s = cube_grid_weights(sun, self.grid_size)
+            idx_o, w_o = cube_grid_weights(obs, self.grid_size)
+            product = _interpolate(pose.vis_t, idx_s, w_s) * _interpolate(pose.vis_t, idx_o, w_o)
+            product *= pose.area_occluded
+            weight[:, pose.occluded_groups] += np.add.reduceat(product, pose.starts, axis=1)
+        cos_geo_o = obs @ pose.normal_geo.T
+        cos_geo_s = sun @ pose.normal_geo.T
+        gate = np.where((cos_geo_o > 0.0) & (cos_geo_s > 0.0), cos_geo_o, 0.0) * weight
+        total = np.zeros(m)
+        # Groups are sorted by material: one dense BRDF evaluation per material block.
+        for material, begin, end in pose.material_blocks:
+            block = gate[:, begin:end]
+            rows = np.flatnonzero(block.any(axis=1))
+            if len(rows) == 0:
+                continue
+            normal = np.broadcast_to(pose.normal_shade[begin:end], (len(rows), end - begin, 3)).reshape(-1, 3)
+            wo = np.repeat(obs[rows], end - begin, axis=0)
+            shading = np.zeros(len(normal))
+            disk = sun_disk_directions(sun[rows], self.sun_samples[material])
+            for sun_dir in disk:
+                wi = np.repeat(sun_dir, end - begin, axis=0)
+                cos_s = np.maximum(np.einsum("ij,ij->i", normal, wi), 0.0)
+                shading += self.scene.brdfs[material](wi, wo, normal) * cos_s
+            total[rows] += (block[rows] * shading.reshape(len(rows), end - begin)).sum(axis=1) / len(disk)
+        return total
+
+    @property
+    def n_elements(self) -> int:
+        """Elements of the first pose (exposed groups + occludable elements)."""
+        return self.poses[0].n_elements
+
+    @property
+    def nbytes(self) -> int:
+        """Memory held by the visibility tables and element arrays."""
+        return int(sum(p.vis_t.nbytes + p.normal_shade.nbytes * 2 + p.area_occluded.nbytes for p in self.poses))
+
+
+def _interpolate(table, index, weight):
+    """Bilinear interpolation of the (d, e) uint8 ``table`` at (m, 4) corners: (m, e) float32."""
+    weight = weight.astype(np.float32)
+    result = table[index[:, 0]] * weight[:, 0, None]
+    for corner in range(1, 4):
+        result += table[index[:, corner]] * weight[:, corner, None]
+    return result
+
+
+def _normal_step_rad(brdf, normal_step_deg):
+    """Largest shading-normal change within one element for this material."""
+    if normal_step_deg is not None:
+        return math.radians(normal_step_deg)
+    if brdf is None or not brdf.lobe_width_rad:
+        return math.radians(5.0)
+    return math.radians(float(np.clip(math.degrees(brdf.lobe_width_rad) / 2.0, 0.5, 3.0)))
+
+
+def _build_pose(scene, directions, element_size_m, normal_step_rad, progress):
+    mesh = scene.posed()
+    corners, n_geo = mesh.corners_m, mesh.face_normals
+    vertices = np.unique(np.round(mesh.vertices_m, 9), axis=0)
+    tolerance = 1e-6 * max(mesh.radius_m, 1.0)
+    # Exposed test per (triangle, side): the highest vertex above the triangle's plane.
+    exposed = np.zeros((len(corners), 2), dtype=bool)
+    for begin in range(0, len(corners), 2048):
+        sl = slice(begin, begin + 2048)
+        height = vertices @ n_geo[sl].T - np.einsum("ij,ij->i", corners[sl, 0], n_geo[sl])[None, :]
+        exposed[sl, 0] = height.max(axis=0) <= tolerance
+        exposed[sl, 1] = -height.min(axis=0) <= tolerance
+    inner = mesh.inner_sides()
+    # Subdivision level per triangle.
+    spread = np.stack([np.einsum("ij,ij->i", mesh.corner_normals[:, a], mesh.corner_normals[:, b])
+                       for a, b in ((0, 1), (1, 2), (2, 0))], axis=1).min(axis=1)
+    level_normal = np.ceil(np.arccos(np.clip(spread, -1.0, 1.0)) / normal_step_rad[mesh.material_index] - 1e-9)
+    # Elements of about element_size_m**2 / 2 (a right triangle with legs element_size_m).
+    level_size = np.ceil(np.sqrt(2.0 * mesh.areas_m2) / element_size_m)
+    elements = []
+    for side, sign in ((0, 1.0), (1, -1.0)):
+        level = np.maximum(1, np.maximum(level_normal, np.where(exposed[:, side], 1, level_size))).astype(int)
+        for lv in np.unique(level[~inner[:, side]]):
+            tris = np.flatnonzero((level == lv) & ~inner[:, side])
+            bary = _subdivision_template(lv)
+            points = np.einsum("pc,tcj->tpj", bary, corners[tris])
+            normals = np.einsum("pc,tcj->tpj", bary, mesh.corner_normals[tris])
+            normals /= np.linalg.norm(normals, axis=2, keepdims=True)
+            side_normal = sign * n_geo[tris]
+            flip = np.einsum("tpj,tj->tp", normals, side_normal) < 0.0
+            normals[flip] *= -1.0
+            k = len(bary)
+            elements.append(dict(
+                point=points.reshape(-1, 3), normal=normals.reshape(-1, 3),
+                geo=np.repeat(side_normal, k, axis=0), area=np.repeat(mesh.areas_m2[tris] / k, k),
+                material=np.repeat(mesh.material_index[tris], k),
+                exposed=np.repeat(exposed[tris, side], k)))
+    el = {key: np.concatenate([e[key] for e in elements]) for key in elements[0]}
+    occl = np.flatnonzero(~el["exposed"])
+    visibility = np.zeros((len(directions), len(occl)), dtype=np.uint8)
+    n_rays = 0
+    if len(occl):
+        visibility, n_rays = _visibility(mesh, el["point"][occl], el["geo"][occl], directions, progress)
+        upper = (el["geo"][occl] @ directions.T).T > 0.0
+        seen = (visibility.astype(bool) & upper).any(axis=0)
+        blocked = (~visibility.astype(bool) & upper).any(axis=0)
+        el["exposed"][occl[~blocked]] = True
+        drop = occl[~seen & blocked]
+        keep_mask = np.ones(len(el["area"]), dtype=bool)
+        keep_mask[drop] = False
+        keep_cols = seen & blocked
+        visibility = visibility[:, keep_cols]
+        occl_kept = occl[keep_cols]
+        el = {key: value[keep_mask] for key, value in el.items()}
+        # Re-index the occludable elements after dropping.
+        new_index = np.cumsum(keep_mask) - 1
+        occl = new_index[occl_kept]
+    # Group elements by material, geometric normal and (quantised) shading normal.
+    quantum = 1e-3
+    # Material first in the key, so np.unique sorts the groups into one block per material.
+    key = np.column_stack([el["material"], np.round(el["geo"] / 1e-6), np.round(el["normal"] / quantum)]).astype(np.int64)
+    _, group, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    group = group.reshape(-1)
+    n_groups = len(counts)
+    weight_area = el["area"]
+    normal_shade = np.zeros((n_groups, 3))
+    np.add.at(normal_shade, group, el["normal"] * weight_area[:, None])
+    normal_shade /= np.linalg.norm(normal_shade, axis=1, keepdims=True)
+    normal_geo = np.zeros((n_groups, 3))
+    normal_geo[group] = el["geo"]
+    material = np.zeros(n_groups, dtype=np.int64)
+    material[group] = el["material"]
+    area_exposed = np.zeros(n_groups)
+    exposed_mask = el["exposed"].copy()
+    exposed_mask[occl] = False
+    np.add.at(area_exposed, group[exposed_mask], weight_area[exposed_mask])
+    order = np.argsort(group[occl], kind="stable")
+    occl_sorted = occl[order]
+    visibility = np.ascontiguousarray(visibility[:, order])
+    occl_groups_all = group[occl_sorted]
+    starts = np.flatnonzero(np.r_[True, np.diff(occl_groups_all) != 0]) if len(occl_sorted) else np.zeros(0, int)
+    bounds = np.flatnonzero(np.r_[True, np.diff(material) != 0, True])
+    blocks = tuple((int(material[a]), int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:]))
+    return _Pose(normal_shade, normal_geo, material, area_exposed, visibility,
+                 weight_area[occl_sorted].astype(np.float32), starts, occl_groups_all[starts],
+                 n_groups + len(occl_sorted), n_rays, blocks)
+
+
+def _visibility(mesh, points, normals, directions, progress):
+    """(d, e) uint8: 1 where the ray from element e toward direction d escapes the mesh.
+
+    Directions below an element's plane are not cast and set to 1, so that interpolation near
+    the horizon is not dragged down by the surface itself (the cosine gate removes them).
+    """
+    raycaster = _open3d_scene(mesh)
+    offset = 1e-4 * max(mesh.radius_m, 1.0)
+    origins = points + offset * normals
+    cosines = directions @ normals.T  # (d, e)
+    pairs_d, pairs_e = np.nonzero(cosines > 0.0)
+    visibility = np.ones(cosines.shape, dtype=np.uint8)
+    total = len(pairs_d)
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+        bar = tqdm(total=total, unit="ray", unit_scale=True, desc="visibility")
+    for begin in range(0, total, _MAX_RAYS_PER_BATCH):
+        d_idx = pairs_d[begin:begin + _MAX_RAYS_PER_BATCH]
+        e_idx = pairs_e[begin:begin + _MAX_RAYS_PER_BATCH]
+        rays = np.concatenate([origins[e_idx], directions[d_idx]], axis=1).astype(np.float32)
+        blocked = raycaster.test_occlusions(rays).numpy()
+        visibility[d_idx[blocked], e_idx[blocked]] = 0
+        if bar is not None:
+            bar.update(len(d_idx))
+    if bar is not None:
+        bar.close()
+    return visibility, total
