@@ -10,7 +10,8 @@ An archive is a directory::
 and one object file holds (all names below are literal HDF5 paths)::
 
     /                      attrs: schema_version, format, norad, name, cospar, updated_utc,
-                           sample_units (JSON: the unit of every samples column)
+                           sample_units (JSON: the unit of every samples column),
+                           catalog_time_units
     /catalog               (m,) compound table, one row per stored pass version
     /passes/<pass_id>      attrs: metadata (JSON: everything that is not a per-sample array)
     /passes/<pass_id>/samples   (n,) compound table: time_utc (int64 ns since 1970-01-01 UTC),
@@ -185,6 +186,7 @@ def write_file_attributes(file: h5py.File, norad: int) -> None:
     file.attrs["schema_version"] = SCHEMA_VERSION
     file.attrs["norad"] = norad
     file.attrs["sample_units"] = json.dumps(SAMPLE_UNITS)
+    file.attrs["catalog_time_units"] = TIME_UNITS  # of the catalog's start_utc and end_utc
 
 
 def read_pass(group: h5py.Group, superseded_by: str | None = None) -> StoredPass:
@@ -222,8 +224,7 @@ def write_catalog(file: h5py.File, rows: list[PassSummary]) -> None:
                     row.source_name, row.source_sha256, row.source_format, row.ingested_utc)
     if "catalog" in file:
         del file["catalog"]
-    catalog = file.create_dataset("catalog", data=table)
-    catalog.attrs["start_utc, end_utc"] = TIME_UNITS
+    _create_table(file, "catalog", table)
 
 
 def read_catalog(file: h5py.File) -> list[PassSummary]:

@@ -393,9 +393,11 @@ class Archive:
                     freed = int(file.attrs.get("freed_bytes", 0)) + _catalog_bytes(file)
                     layout.write_catalog(file, rows)
                     file.attrs["freed_bytes"] = freed
-                    file.attrs["name"] = latest.name
-                    file.attrs["cospar"] = latest.cospar or str(file.attrs.get("cospar", ""))
                     file.attrs["updated_utc"] = now
+                    # Attributes cost ~0.1 ms each: write the object's name only when it changes.
+                    for key, value in (("name", latest.name), ("cospar", latest.cospar)):
+                        if value and attrs.get(key) != value:
+                            file.attrs[key] = value
         return CommitEvent(norad=norad, ingested=tuple(ingested), already_present=tuple(present))
 
     def _remove_own_temp_files(self, norad: int) -> None:
