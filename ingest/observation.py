@@ -173,6 +173,26 @@ class Pass:
         if np.any(np.diff(self.time_utc.view("int64")) <= 0):
             raise ValueError(f"pass {self.source_name!r}: time_utc must be strictly increasing")
 
+    @classmethod
+    def from_file(cls, path) -> "Pass":
+        """The one pass of an observation file; `ingest.read_file` returns all passes of any file.
+
+        Raises
+        ------
+        ValueError
+            When the file holds several passes (a ``.phc`` file holds B and V).
+        FormatError
+            When the file is not a valid observation file.
+        """
+        from ingest.readers import read_file
+
+        passes = read_file(path)
+        if len(passes) != 1:
+            bands = ", ".join(p.band for p in passes)
+            raise ValueError(f"{path} holds {len(passes)} passes (bands {bands}); use ingest.read_file(path) "
+                             "to get all of them")
+        return passes[0]
+
     # -- derived views -------------------------------------------------------------------
     def __len__(self) -> int:
         return self.time_utc.shape[0]

@@ -109,12 +109,12 @@ class PhcReader:
 
     def parse(self, text: TextFile) -> tuple[Pass, ...]:
         """Build the B and V passes from an already loaded file."""
-        start_ns, first_time = _first_line(text)
+        midnight_ns, start_tod_ns, first_time = _first_line(text)
         keys, tle, column_line, notes = _header(text)
         exposure_s = _positive_float(text, keys, "dt", "dt=1.0")
         norad = _norad(text, keys, tle)
         rows = read_rows(text, column_line + 1, PHC_COLUMNS)
-        stamps_ns = _stamps(text, rows, start_ns)
+        stamps_ns = _stamps(text, rows, midnight_ns, start_tod_ns)
         shift_s = exposure_s / 2.0
         time_utc = to_datetime64(stamps_ns + int(round(shift_s * NS_PER_S)))
         _check_geometry(text, rows)
@@ -168,8 +168,8 @@ class PhcReader:
         return tuple(passes)
 
 
-def _first_line(text: TextFile) -> tuple[int, str]:
-    """Line 1: the first sample's date and time -> (ns of that date's midnight, the text)."""
+def _first_line(text: TextFile) -> tuple[int, int, str]:
+    """Line 1: the first sample's date and time -> (ns of that date's midnight, ns of that time of day, the text)."""
     line = text.line(1).lstrip("\ufeff").strip()
     match = _FIRST_LINE.match(line)
     if match is None:
@@ -178,7 +178,8 @@ def _first_line(text: TextFile) -> tuple[int, str]:
         midnight = np.datetime64(match.group(1), "D").astype("datetime64[ns]").astype(np.int64)
     except ValueError:
         raise text.error(1, f"{match.group(1)!r} is not a calendar date") from None
-    return int(midnight), line
+    clock_ns, _ = time_of_day_ns(np.array([match.group(2).encode()]))
+    return int(midnight), int(clock_ns[0]), line
 
 
 def _header(text: TextFile):
@@ -245,8 +246,12 @@ def _norad(text: TextFile, keys: dict, tle) -> int:
     return norad
 
 
-def _stamps(text: TextFile, rows: Rows, midnight_ns: int) -> np.ndarray:
-    """Times of day + the date of line 1, rolling over midnight; ns since 1970 UTC."""
+def _stamps(text: TextFile, rows: Rows, midnight_ns: int, start_tod_ns: int) -> np.ndarray:
+    """Times of day + the date of line 1, rolling over midnight; ns since 1970 UTC.
+
+    The first row is on line 1's date unless it is more than 12 h earlier in the day than line 1's
+    time (the rows before midnight were removed): then it is on the next day.
+    """
     tod, ok = time_of_day_ns(rows["ut"])
     bad = np.flatnonzero(~ok)
     if len(bad):
@@ -262,7 +267,8 @@ def _stamps(text: TextFile, rows: Rows, midnight_ns: int) -> np.ndarray:
         raise text.error(int(rows.line[k + 1]), f"time {this} {kind} the previous row's {previous} "
                                                 f"(line {int(rows.line[k])}); rows must be in time order "
                                                 "without repeats")
-    day = np.concatenate([[0], np.cumsum(rollover)])
+    first_day = 1 if tod[0] - start_tod_ns < -_HALF_DAY_NS else 0
+    day = first_day + np.concatenate([[0], np.cumsum(rollover)])
     return midnight_ns + day * NS_PER_DAY + tod
 
 

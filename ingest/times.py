@@ -29,6 +29,10 @@ _UNIX_EPOCH_JD_DAY = 2440587  # the JD day (starting at noon) that contains the 
 # Julian dates this project can meet: 1858-11-17 .. 2132-08-31.
 _JD_RANGE = (2_400_000, 2_500_000)
 _DATE_RE = re.compile(rb"^\d{4}-\d{2}-\d{2}$")
+_JD_INT_DIGITS = 8
+_JD_FRAC_DIGITS = 18
+_INT_PLACES = 10 ** np.arange(_JD_INT_DIGITS - 1, -1, -1, dtype=np.int64)
+_FRAC_PLACES = 10 ** np.arange(_JD_FRAC_DIGITS - 1, -1, -1, dtype=np.int64)
 
 
 def _char_matrix(column: np.ndarray) -> np.ndarray:
@@ -41,14 +45,6 @@ def _char_matrix(column: np.ndarray) -> np.ndarray:
     used = np.flatnonzero(chars.any(axis=0))
     width = int(used[-1]) + 1 if len(used) else 0
     return chars[:, :width].astype(np.int64)
-
-
-def _digits_value(chars: np.ndarray, is_digit: np.ndarray) -> np.ndarray:
-    """Integer value of the digit characters of each row (non-digits contribute nothing)."""
-    digits = np.where(is_digit, chars - 48, 0)
-    # Place value of each digit: the number of digits to its right in the same row.
-    right = np.cumsum(is_digit[:, ::-1], axis=1)[:, ::-1] - is_digit
-    return (digits * 10 ** np.minimum(right, 18)).sum(axis=1)
 
 
 def time_of_day_ns(column: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -142,29 +138,34 @@ def julian_date_ns(column: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     ns : (n,) int64
     ok : (n,) bool
         True for plain decimals with one point whose day lies in 1858..2132.
+
+    >>> ns, ok = julian_date_ns(np.array([b"2440587.5", b"2460746.230093974", b"24607a6.2"]))
+    >>> ns[:2].tolist(), ok.tolist()
+    ([0, 1741714280119353600], [True, True, False])
     """
-    chars = _char_matrix(column)
+    column = np.ascontiguousarray(column)
+    chars = column.view(np.uint8).reshape(len(column), column.dtype.itemsize)
     n, width = chars.shape
-    is_digit = (chars >= 48) & (chars <= 57)
     is_dot = chars == 46
-    used = chars != 0
-    ok = (is_dot.sum(axis=1) == 1) & (is_digit | is_dot | ~used).all(axis=1) & used[:, 0]
-    ok &= ~((chars[:, 1:] != 0) & (chars[:, :-1] == 0)).any(axis=1)
+    is_digit = (chars >= 48) & (chars <= 57)
+    ok = (is_dot.sum(axis=1) == 1) & (is_digit | is_dot | (chars == 0)).all(axis=1) & (chars[:, 0] != 0)
+    ok &= ~((chars[:, 1:] != 0) & (chars[:, :-1] == 0)).any(axis=1)  # zero padding only at the end
     dot = np.argmax(is_dot, axis=1)
-    column_index = np.arange(width)
-    before = column_index < dot[:, None]
-    after = column_index > dot[:, None]
-    int_digits = is_digit & before
-    ok &= int_digits.sum(axis=1).astype(bool) & (int_digits.sum(axis=1) <= 8)
-    day = _digits_value(chars, int_digits)
-    # Fraction: at most 18 digits fit in int64; further digits are far below a nanosecond.
-    frac_digit = is_digit & after & (column_index <= dot[:, None] + 18)
-    numerator = _digits_value(chars, frac_digit)
-    n_frac = frac_digit.sum(axis=1)
-    fraction = numerator / 10.0 ** n_frac
+    ok &= (dot >= 1) & (dot <= _JD_INT_DIGITS)
+    # Align every row on its decimal point: the integer digits right-aligned in _JD_INT_DIGITS
+    # columns, the fraction left-aligned in _JD_FRAC_DIGITS columns (18 digits fit in int64;
+    # further ones are far below a nanosecond), NUL-padded on both sides.
+    padded = np.zeros((n, _JD_INT_DIGITS + width + _JD_FRAC_DIGITS), dtype=np.uint8)
+    padded[:, _JD_INT_DIGITS:_JD_INT_DIGITS + width] = chars
+    whole = np.take_along_axis(padded, dot[:, None] + np.arange(_JD_INT_DIGITS), axis=1)
+    fraction = np.take_along_axis(padded, (dot + _JD_INT_DIGITS + 1)[:, None] + np.arange(_JD_FRAC_DIGITS), axis=1)
+    ok &= fraction[:, 0] != 0  # a digit after the point
+    day = np.where(whole == 0, 0, whole.astype(np.int64) - 48) @ _INT_PLACES
+    numerator = np.where(fraction == 0, 0, fraction.astype(np.int64) - 48) @ _FRAC_PLACES
     ok &= (day >= _JD_RANGE[0]) & (day < _JD_RANGE[1])
     # The JD day starts at noon: JD d.f is (d - 2440587) days + (f - 0.5) day after the epoch.
-    ns = (day - _UNIX_EPOCH_JD_DAY) * NS_PER_DAY - NS_PER_DAY // 2 + np.rint(fraction * NS_PER_DAY).astype(np.int64)
+    day_ns = (numerator / 10.0**_JD_FRAC_DIGITS) * NS_PER_DAY
+    ns = (day - _UNIX_EPOCH_JD_DAY) * NS_PER_DAY - NS_PER_DAY // 2 + np.rint(day_ns).astype(np.int64)
     return np.where(ok, ns, 0), ok
 
 

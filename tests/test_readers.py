@@ -128,6 +128,13 @@ def test_unknown_content_with_a_known_extension_is_refused(tmp_path):
         ingest.read_file(path)
 
 
+def test_pass_from_file(shared_data):
+    assert len(ingest.Pass.from_file(TOPEX_PHV)) == 2320
+    with pytest.raises(ValueError, match=r"51511_250130_1719\.phc holds 2 passes \(bands B, V\); use "
+                                         r"ingest\.read_file\(path\) to get all of them"):
+        ingest.Pass.from_file(COSMOS2553_PHC)
+
+
 def test_reader_table_and_format_argument(shared_data):
     assert set(READERS) == {"ccd_phot", "phc"}
     (p,) = READERS["ccd_phot"].read(TOPEX_PHV)
@@ -288,6 +295,19 @@ def test_phc_times_roll_over_midnight(tmp_path):
     assert list(b.time_utc) == [t("2025-01-30T23:59:58.5"), t("2025-01-30T23:59:59.5"),
                                 t("2025-01-31T00:00:00.5"), t("2025-01-31T00:00:01.5")]
     assert b.duration_s == 3.0
+
+
+def test_phc_first_rows_after_midnight_belong_to_the_next_day(tmp_path):
+    path = tmp_path / "late.phc"
+    # Line 1 says 23:59:58 on the 30th, but the rows before midnight were removed.
+    path.write_text(
+        "2025-01-30 23:59:58\n2025-01-31 00:00:02\ndt=1.0\nCOSPAR ID=22011A\nNORAD ID=51511\nNAME=X\n"
+        "  UT TIME           ImpB-fon     ImpV-fon         FonB       FonV         mB      mV     Az(deg)  El(deg)  Rg(Mm)\n"
+        "00:00:00.000000       315.264     562.981       994.736    1218.019     4.290   3.697    181.052  28.386  3190.071\n"
+        "00:00:01.000000       392.266     780.187       992.734    1214.813     4.060   3.348    181.002  28.469  3185.918\n"
+    )
+    b, _ = ingest.read_file(path)
+    assert list(b.time_utc) == [t("2025-01-31T00:00:00.5"), t("2025-01-31T00:00:01.5")]
 
 
 def test_phc_tle_block(shared_data, tmp_path):
