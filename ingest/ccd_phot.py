@@ -35,7 +35,7 @@ import numpy as np
 
 from ingest import elements
 from ingest.observation import Pass
-from ingest.reduction import fit_reduction, sign_corrected_mag
+from ingest.reduction import fit_note, fit_reduction, sign_corrected_mag
 from ingest.table import Column, Rows, read_rows
 from ingest.textfile import TextFile
 from ingest.times import NS_PER_S, date_days, julian_date_ns, time_of_day_ns, to_datetime64
@@ -151,10 +151,10 @@ class CcdPhotReader:
         # Messages name the columns as this file labels them (magV, Rg(Mm), ...).
         columns = tuple(replace(c, label=label) for c, label in
                         zip(UT_COLUMNS if header.variant == "ut" else JD_COLUMNS, header.labels))
-        rows = read_rows(text, header.column_line + 1, columns)
         exposure_s = _exposure(text, header)
         time_format = header.keys.get("Time_format", (None, None))
         _check_time_format_variant(text, header, time_format)
+        rows = read_rows(text, header.column_line + 1, columns)
 
         stamps_ns = _stamps(text, rows, header.variant)
         shift_s, stamps = stamp_offset_s(to_datetime64(stamps_ns[:1])[0], exposure_s, time_format[0])
@@ -189,10 +189,8 @@ class CcdPhotReader:
             info["last_frame_utc"] = header.times[-1][0]
         for k, note in enumerate(header.notes):
             info[f"note_{k + 1}"] = note
-        if reduction is None:
-            info["reduction"] = "not fitted: fewer than 3 usable rows or no airmass spread"
-        elif reduction.rms_mag >= 0.003:
-            info["reduction"] = f"the magnitudes do not follow the ccd_phot law (RMS {reduction.rms_mag:.4f} mag)"
+        if fit_note(reduction):
+            info["reduction"] = fit_note(reduction)
 
         return (Pass(
             norad=norad, name=name, band=band, site=site, exposure_s=exposure_s,

@@ -44,7 +44,7 @@ import numpy as np
 
 from ingest import elements
 from ingest.observation import Pass
-from ingest.reduction import fit_reduction, sign_corrected_mag
+from ingest.reduction import fit_note, fit_reduction, sign_corrected_mag
 from ingest.table import Column, Rows, read_rows
 from ingest.textfile import TextFile
 from ingest.times import NS_PER_DAY, NS_PER_S, time_of_day_ns, to_datetime64
@@ -152,6 +152,8 @@ class PhcReader:
             mag_corrected = (sign_corrected_mag(mag, rows["el_deg"], reduction)
                              if reduction is not None and reduction.sign_error else None)
             band_info = dict(info, n_sentinel=int(sentinel.sum()), n_nonpositive_flux=int((flux <= 0).sum()))
+            if fit_note(reduction):
+                band_info["reduction"] = fit_note(reduction)
             passes.append(Pass(
                 norad=norad, name=name, band=band, site=UZHHOROD, exposure_s=exposure_s,
                 time_utc=time_utc, mag=mag, mag_err=mag_err, flux=flux, flux_err=flux_err,

@@ -23,7 +23,7 @@ from ingest.observation import Reduction
 
 __all__ = [
     "instrumental_mag", "airmass", "range_correction_mag", "standard_mag",
-    "fit_reduction", "sign_corrected_mag", "REFERENCE_RANGE_KM", "LAW_RMS_LIMIT_MAG",
+    "fit_reduction", "sign_corrected_mag", "fit_note", "REFERENCE_RANGE_KM", "LAW_RMS_LIMIT_MAG",
 ]
 
 REFERENCE_RANGE_KM = 1000.0
@@ -193,3 +193,13 @@ def sign_corrected_mag(mag: np.ndarray, el_deg: np.ndarray, reduction: Reduction
     (n,) float
     """
     return np.asarray(mag, dtype=float) - 2.0 * reduction.extinction_term_mag * airmass(el_deg)
+
+
+def fit_note(reduction: Reduction | None) -> str | None:
+    """A sentence for a pass's header when its reduction is missing or does not hold, else None."""
+    if reduction is None:
+        return "not fitted: fewer than 3 usable rows or no spread in airmass"
+    if reduction.rms_mag >= LAW_RMS_LIMIT_MAG:
+        return (f"the magnitudes do not follow the reduction law (RMS {reduction.rms_mag:.4f} mag, "
+                f"more than {LAW_RMS_LIMIT_MAG} mag); no sign correction applied")
+    return None

@@ -45,20 +45,20 @@ class Rows:
 
     Attributes
     ----------
-    values : (n,) structured array
-        One field per `Column` (float64 or bytes).
+    columns : dict of str to (n,) array
+        One contiguous array per `Column` key (float64, or fixed-width bytes for text).
     line : (n,) int64
         1-based file line of each row.
     """
 
-    values: np.ndarray
+    columns: dict
     line: np.ndarray
 
     def __len__(self) -> int:
-        return len(self.values)
+        return len(self.line)
 
     def __getitem__(self, key: str) -> np.ndarray:
-        return self.values[key]
+        return self.columns[key]
 
 
 def _dtype(columns: tuple[Column, ...]) -> np.dtype:
@@ -85,7 +85,7 @@ def read_rows(text: TextFile, first_line: int, columns: tuple[Column, ...]) -> R
     nonblank = body_lines if len(values) == len(body_lines) else body_lines[~text.blank[first_line - 1:]]
     if len(nonblank) != len(values):
         raise text.error(None, f"found {len(values)} data rows in {len(nonblank)} non-blank lines; the file is damaged")
-    rows = Rows(values, nonblank.astype(np.int64))
+    rows = Rows({c.key: np.ascontiguousarray(values[c.key]) for c in columns}, nonblank.astype(np.int64))
     _check_finite(text, rows, columns)
     return rows
 
@@ -94,7 +94,7 @@ def _check_finite(text: TextFile, rows: Rows, columns: tuple[Column, ...]) -> No
     for index, column in enumerate(columns):
         if column.kind != "float":
             continue
-        bad = np.flatnonzero(~np.isfinite(rows.values[column.key]))
+        bad = np.flatnonzero(~np.isfinite(rows[column.key]))
         if len(bad):
             line = int(rows.line[bad[0]])
             token = text.line(line).split()[index]

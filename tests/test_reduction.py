@@ -11,7 +11,7 @@ import pytest
 
 import ingest
 from ingest.reduction import (
-    LAW_RMS_LIMIT_MAG, airmass, fit_reduction, instrumental_mag, range_correction_mag, sign_corrected_mag,
+    LAW_RMS_LIMIT_MAG, airmass, fit_note, fit_reduction, instrumental_mag, range_correction_mag, sign_corrected_mag,
     standard_mag,
 )
 from tests.conftest import COSMOS2540_PHV, COSMOS2553_JD_PHV, COSMOS2553_PHC, TOPEX_PHV
@@ -78,6 +78,8 @@ def test_a_file_that_breaks_the_law_is_not_called_a_sign_error():
     mag = standard_mag(flux, 0.1, el, range_km, 20.0, 0.3) + 2 * 0.3 * airmass(el) + rng.normal(0, 0.05, 500)
     fit = fit_reduction(mag, flux, 0.1, el, range_km)
     assert fit.extinction_term_mag > 0 and fit.rms_mag > LAW_RMS_LIMIT_MAG and not fit.sign_error
+    assert fit_note(fit).startswith("the magnitudes do not follow the reduction law (RMS 0.05")
+    assert fit_note(None) == "not fitted: fewer than 3 usable rows or no spread in airmass"
 
 
 # PROVENANCE.md: TOPEX 2024-07-30 A=19.4, +0.1 X; COSMOS 2540 A=21.4, -0.4 X; COSMOS 2553 (JD) A=20.5, +0.2 X.
