@@ -81,16 +81,19 @@ def write_ccd_phot(pass_: Pass, path: str | Path, variant: str = "ut", *, range_
     if not np.all(pass_.flux > 0):
         raise ValueError("ccd_phot files hold only positive fluxes; drop the samples whose flux is not positive")
 
-    provisional = pass_.time_utc[0]
-    shift_s, _ = stamp_offset_s(provisional, pass_.exposure_s, time_format)
+    if time_format is not None:
+        named = {"ut": "ut", "utc": "ut", "jd": "jd"}
+        variants = {named[w] for w in time_format.lower().replace(",", " ").split() if w in named}
+        if variants - {variant}:
+            raise ValueError(f"time_format={time_format!r} names other time columns than variant={variant!r}")
+
+    # Undo the shift the reader will apply. Stamps are never later than mid-exposure, so a pass
+    # whose first mid-exposure time is before 2023-02-01 also has its first stamp before it.
+    shift_s, _ = stamp_offset_s(pass_.time_utc[0], pass_.exposure_s, time_format)
     stamps = to_datetime64(pass_.time_utc.view(np.int64) - int(round(shift_s * NS_PER_S)))
-    # The reader decides the stamp convention from the first stamp; check it agrees.
-    if stamp_offset_s(stamps[0], pass_.exposure_s, time_format)[0] != shift_s:
-        stamps = to_datetime64(pass_.time_utc.view(np.int64))
 
     lines = _ccd_phot_header(pass_, stamps, time_format)
-    unit_label = range_unit
-    lines.append((_UT_COLUMN_LINE if variant == "ut" else _JD_COLUMN_LINE).format(band=pass_.band, unit=unit_label))
+    lines.append((_UT_COLUMN_LINE if variant == "ut" else _JD_COLUMN_LINE).format(band=pass_.band, unit=range_unit))
     names = list(frame_names) if frame_names is not None else _frame_names(pass_.norad, stamps)
     names = [name + "*" if saturated else name for name, saturated in zip(names, pass_.saturated.tolist())]
     if centroids_px is None:
@@ -149,8 +152,7 @@ def write_phc(pass_b: Pass, pass_v: Pass, path: str | Path, *, sky_b: np.ndarray
     stamps = to_datetime64(pass_b.time_utc.view(np.int64) - int(round(exposure_s / 2 * NS_PER_S)))
     start = stamps[0]
     end = stamps[-1] + np.timedelta64(int(round(exposure_s * NS_PER_S)), "ns")
-    days = (stamps.astype("datetime64[D]") - start.astype("datetime64[D]")).astype(int)
-    if np.any(np.diff(days) > 1) or np.any((np.diff(stamps) >= np.timedelta64(12, "h"))):
+    if np.any(np.diff(stamps) >= np.timedelta64(12, "h")):
         raise ValueError("a phc file cannot hold gaps of 12 h or more: its rows carry only the time of day")
 
     lines = [

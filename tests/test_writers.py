@@ -121,6 +121,8 @@ def test_writer_argument_errors(shared_data, tmp_path):
     b, v = ingest.read_file(COSMOS2553_PHC)
     with pytest.raises(ValueError, match=r"variant='mjd' is not one of \('ut', 'jd'\); use 'ut' or 'jd'"):
         write_ccd_phot(p, tmp_path / "x.phV", "mjd")
+    with pytest.raises(ValueError, match="time_format='JD start' names other time columns than variant='ut'"):
+        write_ccd_phot(p, tmp_path / "x.phV", "ut", time_format="JD start")
     with pytest.raises(ValueError, match="ccd_phot files cannot hold missing magnitudes"):
         write_ccd_phot(p.replace(mag=np.where(np.arange(len(p)) == 3, np.nan, p.mag)), tmp_path / "x.phV")
     with pytest.raises(ValueError, match="write_phc needs a B and a V pass, got bands 'V' and 'B'"):
