@@ -64,8 +64,8 @@ def read_file(path: str | Path, format: str = "auto") -> tuple[Pass, ...]:
 
     Examples
     --------
-    >>> from tests.conftest import TOPEX_PHV  # doctest: +SKIP
-    >>> (topex,) = read_file(TOPEX_PHV)       # doctest: +SKIP
+    >>> (topex,) = read_file("result_22076_20240730_UT212240.phV")  # doctest: +SKIP
+    >>> b, v = read_file("51511_250130_1719.phc")                     # doctest: +SKIP
     """
     if format != "auto" and format not in READERS:
         raise ValueError(f"format={format!r} is not one of 'auto', {', '.join(map(repr, READERS))}")
