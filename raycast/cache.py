@@ -263,6 +263,32 @@ class SceneCache:
         return int(sum(p.vis_t.nbytes + p.normal_shade.nbytes * 2 + p.area_occluded.nbytes for p in self.poses))
 
 
+def _exposed_sides(vertices, corners, normals, tolerance):
+    """(t, 2) bool: no vertex lies above the plane of this triangle side (+ normal, - normal).
+
+    Such a plane supports the convex hull of the mesh, so the test is a lookup of the side's
+    plane among the hull's facet planes (Qhull); a flat mesh has no hull and both sides of
+    every triangle are exposed.
+    """
+    from scipy.spatial import ConvexHull, QhullError, cKDTree
+
+    offsets = np.einsum("ij,ij->i", corners[:, 0], normals)
+    scale = float(np.abs(vertices).max()) or 1.0
+    try:
+        hull = ConvexHull(vertices)
+    except QhullError:
+        return np.ones((len(corners), 2), dtype=bool)
+    # Hull facets: n . x + c <= 0 inside, so the plane is n . x = -c.
+    planes = np.column_stack([hull.equations[:, :3], -hull.equations[:, 3] / scale])
+    tree = cKDTree(planes)
+    exposed = np.zeros((len(corners), 2), dtype=bool)
+    for side, sign in ((0, 1.0), (1, -1.0)):
+        keys = np.column_stack([sign * normals, sign * offsets / scale])
+        distance, _ = tree.query(keys, distance_upper_bound=1e-5)
+        exposed[:, side] = np.isfinite(distance)
+    return exposed
+
+
 def _interpolate(table, index, weight):
     """Bilinear interpolation of the (d, e) uint8 ``table`` at (m, 4) corners: (m, e) float32."""
     weight = weight.astype(np.float32)
@@ -286,13 +312,7 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, progress):
     corners, n_geo = mesh.corners_m, mesh.face_normals
     vertices = np.unique(np.round(mesh.vertices_m, 9), axis=0)
     tolerance = 1e-6 * max(mesh.radius_m, 1.0)
-    # Exposed test per (triangle, side): the highest vertex above the triangle's plane.
-    exposed = np.zeros((len(corners), 2), dtype=bool)
-    for begin in range(0, len(corners), 2048):
-        sl = slice(begin, begin + 2048)
-        height = vertices @ n_geo[sl].T - np.einsum("ij,ij->i", corners[sl, 0], n_geo[sl])[None, :]
-        exposed[sl, 0] = height.max(axis=0) <= tolerance
-        exposed[sl, 1] = -height.min(axis=0) <= tolerance
+    exposed = _exposed_sides(vertices, corners, n_geo, tolerance)
     inner = mesh.inner_sides()
     # Subdivision level per triangle.
     spread = np.stack([np.einsum("ij,ij->i", mesh.corner_normals[:, a], mesh.corner_normals[:, b])

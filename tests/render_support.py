@@ -1,0 +1,37 @@
+"""Helpers shared by the renderer tests: direction pairs and a minimal BodyGeometry."""
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+
+METHODS = ("direct", "cached")
+
+
+def unit(v):
+    v = np.asarray(v, dtype=float)
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def in_plane(incidence_deg, emergence_deg, azimuth_deg=180.0):
+    """Sun and observer unit vectors (m, 3) over a +z normal: Sun at ``incidence`` from the
+    normal in the x-z plane, observer at ``emergence`` and ``azimuth`` from the Sun's plane."""
+    i = np.radians(np.atleast_1d(incidence_deg).astype(float))
+    e = np.radians(np.atleast_1d(emergence_deg).astype(float))
+    a = np.radians(np.broadcast_to(azimuth_deg, e.shape).astype(float))
+    sun = np.column_stack([np.sin(i), np.zeros_like(i), np.cos(i)])
+    obs = np.column_stack([np.sin(e) * np.cos(a), np.sin(e) * np.sin(a), np.cos(e)])
+    return sun, obs
+
+
+def geometry(sun, obs, sunlit=None, range_km=1000.0):
+    """A BodyGeometry-like object with k = 1 sub-sample per frame (or (n, k, 3) inputs)."""
+    sun = np.asarray(sun, dtype=float)
+    obs = np.asarray(obs, dtype=float)
+    if sun.ndim == 2:
+        sun, obs = sun[:, None, :], obs[:, None, :]
+    n, k = sun.shape[:2]
+    phase = np.degrees(np.arccos(np.clip(np.einsum("nj,nj->n", sun[:, 0], obs[:, 0]), -1, 1)))
+    return SimpleNamespace(sun_body=sun, obs_body=obs, weights=np.full(k, 1.0 / k),
+                           sunlit=np.ones((n, k)) if sunlit is None else np.asarray(sunlit, dtype=float),
+                           range_km=np.full(n, range_km), phase_angle_deg=phase)
