@@ -84,7 +84,8 @@ class TextFile:
                 )
             head = stream.read(HEAD_BYTES)
             _check_head(path, head)
-            data = head + stream.read(MAX_FILE_BYTES + 1 - len(head))
+            # Ask for exactly what fstat reported: read(n) allocates n bytes up front.
+            data = head + stream.read(max(size - len(head), 0)) if size > len(head) else head
         return cls.from_bytes(path, data)
 
     @classmethod
