@@ -64,7 +64,7 @@ def magnitude(intensity_m2_sr, range_km, band: str = "V", sun_mag: float | None 
     1000 km:
 
     >>> round(float(magnitude(0.5 / np.pi, 1000.0, "V")), 3)
-    5.231
+    5.235
     """
     m_sun = solar_magnitude(band) if sun_mag is None else float(sun_mag)
     intensity = np.asarray(intensity_m2_sr, dtype=float)
