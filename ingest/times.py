@@ -36,7 +36,7 @@ _FRAC_PLACES = 10 ** np.arange(_JD_FRAC_DIGITS - 1, -1, -1, dtype=np.int64)
 
 
 def _char_matrix(column: np.ndarray) -> np.ndarray:
-    """(n,) fixed-width bytes ('S') -> (n, width) int64 character codes, zero-padded.
+    """(n,) fixed-width bytes ('S') -> (n, width) int16 character codes, zero-padded.
 
     The width is cut to the longest entry, so a wide field costs only what it holds.
     """
@@ -44,7 +44,7 @@ def _char_matrix(column: np.ndarray) -> np.ndarray:
     chars = column.view(np.uint8).reshape(len(column), column.dtype.itemsize)
     used = np.flatnonzero(chars.any(axis=0))
     width = int(used[-1]) + 1 if len(used) else 0
-    return chars[:, :width].astype(np.int64)
+    return chars[:, :width].astype(np.int16)
 
 
 def time_of_day_ns(column: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -73,9 +73,9 @@ def time_of_day_ns(column: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     is_digit = (chars >= 48) & (chars <= 57)
     value = chars - 48
     ok = (is_digit[:, [0, 1, 3, 4, 6, 7]].all(axis=1) & (chars[:, 2] == 58) & (chars[:, 5] == 58))
-    hours = value[:, 0] * 10 + value[:, 1]
-    minutes = value[:, 3] * 10 + value[:, 4]
-    seconds = value[:, 6] * 10 + value[:, 7]
+    hours = value[:, 0].astype(np.int64) * 10 + value[:, 1]
+    minutes = value[:, 3].astype(np.int64) * 10 + value[:, 4]
+    seconds = value[:, 6].astype(np.int64) * 10 + value[:, 7]
     ok &= (hours < 24) & (minutes < 60) & (seconds < 60)
     frac_ns = np.zeros(n, np.int64)
     if width > 8:
@@ -91,8 +91,8 @@ def time_of_day_ns(column: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         first_digit = frac_digit[:, 0] if fraction.shape[1] else np.zeros(n, bool)
         ok &= ~has_tail | first_digit
         kept = min(fraction.shape[1], 9)
-        scale = 10 ** (8 - np.arange(kept))
-        frac_ns = (np.where(frac_digit[:, :kept], fraction[:, :kept] - 48, 0) * scale).sum(axis=1)
+        scale = 10 ** (8 - np.arange(kept, dtype=np.int64))
+        frac_ns = np.where(frac_digit[:, :kept], fraction[:, :kept] - 48, 0).astype(np.int64) @ scale
     ns = ((hours * 60 + minutes) * 60 + seconds) * NS_PER_S + frac_ns
     return np.where(ok, ns, 0), ok
 
