@@ -4,13 +4,14 @@
 
 1. SGP4 (``sgp4``'s C ``sgp4_array``) gives TEME positions and velocities.
 2. The slowly varying parts of the Earth's orientation and the Sun's position are computed with
-   skyfield (offline, `raycast.ephemeris`) only at nodes 60 s apart and interpolated linearly:
-   the TEME->GCRS matrix, the matrix Q that takes GCRS to ITRS once the Earth rotation angle
-   (ERA) is taken out (``ITRS = Rz(-ERA) Q GCRS``; Q holds precession-nutation and the equation
-   of the origins), Delta T, and the apparent geocentric Sun. The fast part, the ERA, is
-   evaluated exactly at every time from UT1 (leap seconds looked up per time). The
-   interpolation error is measured in tests/test_geometry.py against skyfield evaluated at
-   every time: below 1 mm in position and 1e-9 deg in the Sun's direction.
+   skyfield (offline, `raycast.ephemeris`) only at nodes 60 s apart on the TT axis and
+   interpolated linearly: the TEME->GCRS matrix, the matrix Q that takes GCRS to ITRS once the
+   Earth rotation angle (ERA) is taken out (``ITRS = Rz(-ERA) Q GCRS``; Q holds
+   precession-nutation and the equation of the origins), Delta T, and the apparent geocentric
+   Sun (light time and annual aberration). The fast part, the ERA, is evaluated exactly at
+   every time from UT1 (leap seconds looked up per time). The interpolation error is measured
+   in tests/test_geometry.py against skyfield evaluated at every time: below 1 mm in position
+   and 1e-10 rad in the Sun's direction.
 3. Observer, topocentric azimuth/elevation (geodetic, WGS84 site), range, range rate, the
    Sun and observer directions from the satellite, phase angle, Earth shadow
    (`raycast.shadow`), refraction (`raycast.refraction`, PyEphem's model) and airmass follow
@@ -515,14 +516,14 @@ class _EarthFrames:
         to_itrs = itrs.rotation_at(t)  # (3, 3, nodes): Rz(-GAST) N P B
         q = np.einsum("ijn,jkn->ikn", _rot_z(_era_rad(ref_jd, node_tt_s - delta_t_s)), to_itrs)
         teme_to_gcrs = TEME.rotation_at(t).transpose(1, 0, 2)
-        planets = ephemeris.planets()
-        sun = planets["earth"].at(t).observe(planets["sun"]).apparent().position.km
+        sun = _apparent_sun_km(t)
 
-        # All slowly varying quantities as rows of one table: (9 + 9 + 3 + 1, nodes).
+        # All slowly varying quantities as rows of one table: (9 + 9 + 3 + 1, nodes), with the
+        # slope of each node's cell beside it.
         table = np.concatenate([teme_to_gcrs.reshape(9, n_nodes), q.reshape(9, n_nodes), sun, delta_t_s[None]])
+        slope = np.diff(table, axis=1, append=table[:, -1:])
         index = np.searchsorted(node_cells, cell)  # the node opening each time's cell
-        w = position - cell
-        values = table[:, index] * (1.0 - w) + table[:, index + 1] * w
+        values = table[:, index] + slope[:, index] * (position - cell)
         m = times.shape[0]
         ut1_s = tt_s - values[21]
         return cls(
@@ -545,6 +546,20 @@ class _EarthFrames:
         c, s = self.cos_era, self.sin_era
         w = np.array([c * v[0] - s * v[1], s * v[0] + c * v[1], np.broadcast_to(v[2], c.shape)])
         return _apply(self.q.transpose(1, 0, 2), w)
+
+
+def _apparent_sun_km(t) -> np.ndarray:
+    """(3, nodes) geocentric apparent Sun, GCRS, km: light-time corrected DE421 position with the
+    annual aberration u' = u + v/c - (u . v/c) u (first order; it differs from skyfield's full
+    ``apparent()``, which also bends light past Jupiter and Saturn, by 3e-11 rad, at half the cost)."""
+    planets = ephemeris.planets()
+    earth = planets["earth"].at(t)
+    position = earth.observe(planets["sun"]).position.km
+    distance = np.sqrt(np.einsum("in,in->n", position, position))
+    u = position / distance
+    beta = earth.velocity.km_per_s / 299_792.458
+    apparent = u + beta - u * np.einsum("in,in->n", u, beta)
+    return apparent * (distance / np.sqrt(np.einsum("in,in->n", apparent, apparent)))
 
 
 def _tt_minus_utc_s(ts, ref_jd: float, utc_s: np.ndarray) -> np.ndarray:
