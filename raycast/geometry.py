@@ -123,7 +123,7 @@ def choose_n_sub(exposure_s: float, spin_period_s: float | None = None) -> int:
     if exposure_s <= 0.0 or not math.isfinite(period) or period == 0.0:
         return 1
     turn_deg = 360.0 * exposure_s / period
-    # Round away float noise (0.2 s at 10 s is exactly 4 slices, not 4.000000000000001).
+    # Round away float noise: 0.1 s at 9 s turns exactly 4 deg, i.e. 2 slices, not 2.0000000000000004.
     return int(min(max(math.ceil(round(turn_deg / MAX_SUBSAMPLE_TURN_DEG, 9)), 1), MAX_N_SUB))
 
 
