@@ -35,7 +35,7 @@ _MAX_PENDING_BYTES = 256 << 20
 # Below this many files a process pool costs more (start-up, imports) than it saves.
 _MIN_FILES_FOR_POOL = 16
 _CHUNK_FILES = 4
-_READ_AHEAD_CHUNKS_PER_WORKER = 16
+_READ_AHEAD_CHUNKS_PER_WORKER = 32
 
 _known_sha256: frozenset[str] = frozenset()
 
@@ -118,7 +118,7 @@ def _results(files: list[Path], known: frozenset[str], workers: int):
         return
     chunks = [paths[i:i + _CHUNK_FILES] for i in range(0, len(paths), _CHUNK_FILES)]
     # Read far enough ahead that the readers keep parsing while the parent commits (a commit
-    # round over 50 objects takes a few hundred ms); ~25 MB of passes for 2500-row files.
+    # round over 50 objects takes up to seconds late in a large ingest); ~50 MB of 2500-row passes.
     window = _READ_AHEAD_CHUNKS_PER_WORKER * workers
     with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker, initargs=(known,)) as pool:
         queued = deque()
