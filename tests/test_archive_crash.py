@@ -116,7 +116,7 @@ def test_sigkill_at_random_moments_loses_nothing_committed(corpus, tmp_path):
     archive = tmp_path / "archive"
     rng = np.random.default_rng(SEED)
     committed: dict[str, list[str]] = {}
-    kills = mid_commit = left_temp_files = 0
+    kills = mid_commit = left_temp_files = restarts = 0
     stored = 0
     while kills < N_KILLS:
         worker = Worker("ingest", str(archive), str(directory), "--workers", "1", "--interval", "0.02")
@@ -135,6 +135,7 @@ def test_sigkill_at_random_moments_loses_nothing_committed(corpus, tmp_path):
             # It finished before the kill (a fast machine): start again from an empty archive.
             shutil.rmtree(archive)
             committed, stored = {}, 0
+            restarts += 1
     # The seeded delays must really have interrupted commits, not only parsing.
     assert mid_commit >= 1 and left_temp_files >= 1, (mid_commit, left_temp_files)
 
@@ -144,5 +145,6 @@ def test_sigkill_at_random_moments_loses_nothing_committed(corpus, tmp_path):
     assert report["failed"] == []
     committed.update(final.committed())
     assert check_archive(archive, committed, expected) == len(paths) == len(expected)
-    print(f"{kills} kills, {mid_commit} during a commit, {left_temp_files} left a temporary file; "
-          f"{stored} of {len(paths)} passes stored before the final run")
+    print(f"{kills} kills, {mid_commit} during a commit, {left_temp_files} left a temporary file, "
+          f"{restarts} restart(s) from an empty archive after a run completed; {stored} of {len(paths)} "
+          "passes stored before the final run")
