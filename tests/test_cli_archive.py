@@ -218,3 +218,11 @@ def test_eossa_geometry_against_authorities(path, shared_data):
     sun_az_el = table["Sun_AZ_EL"][every_100th]
     assert np.max(np.abs((sun_az_el[:, 0] - sun.az.deg + 180.0) % 360.0 - 180.0)) < 1e-3
     assert np.max(np.abs(sun_az_el[:, 1] - sun.alt.deg)) < 1e-3
+
+
+def test_ingest_of_a_directory_without_observations_says_so(tmp_path, capsys):
+    (tmp_path / "frames").mkdir()
+    (tmp_path / "frames" / "image_0001.fits").write_bytes(b"SIMPLE  =                    T")
+    assert main(["ingest", str(tmp_path / "frames"), "--archive", str(tmp_path / "a"), "--no-progress"]) == 0
+    assert capsys.readouterr().out.strip() == (
+        "no observation files found (directories are searched for *.ph<letter> files)")

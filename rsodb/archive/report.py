@@ -82,6 +82,8 @@ class IngestReport:
 
     def summary(self) -> str:
         """A few human-readable lines: counts, then one line per failed file."""
+        if self.n_files == 0:
+            return "no observation files found (directories are searched for *.ph<letter> files)"
         rate = f" in {self.elapsed_s:.1f} s" if self.elapsed_s else ""
         lines = [
             f"ingested {len(self.ingested)} file(s) ({len(self.pass_ids)} pass(es)){rate}, "
