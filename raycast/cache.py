@@ -244,12 +244,12 @@ class SceneCache:
             normal = np.broadcast_to(pose.normal_shade[begin:end], (len(rows), end - begin, 3)).reshape(-1, 3)
             wo = np.repeat(obs[rows], end - begin, axis=0)
             shading = np.zeros(len(normal))
-            disk = sun_disk_directions(sun[rows], self.sun_samples[material])
-            for sun_dir in disk:
+            disk, disk_weights = sun_disk_directions(sun[rows], self.sun_samples[material])
+            for sun_dir, disk_weight in zip(disk, disk_weights):
                 wi = np.repeat(sun_dir, end - begin, axis=0)
                 cos_s = np.maximum(np.einsum("ij,ij->i", normal, wi), 0.0)
-                shading += self.scene.brdfs[material](wi, wo, normal) * cos_s
-            total[rows] += (block[rows] * shading.reshape(len(rows), end - begin)).sum(axis=1) / len(disk)
+                shading += disk_weight * self.scene.brdfs[material](wi, wo, normal) * cos_s
+            total[rows] += (block[rows] * shading.reshape(len(rows), end - begin)).sum(axis=1)
         return total
 
     @property

@@ -35,3 +35,25 @@ def geometry(sun, obs, sunlit=None, range_km=1000.0):
     return SimpleNamespace(sun_body=sun, obs_body=obs, weights=np.full(k, 1.0 / k),
                            sunlit=np.ones((n, k)) if sunlit is None else np.asarray(sunlit, dtype=float),
                            range_km=np.full(n, range_km), phase_angle_deg=phase)
+
+
+def topex_pass_geometry(attitude, frames=slice(None), exposure_s=None):
+    """Body-frame geometry of the real TOPEX pass (2024-07-30, Derenivka) for ``attitude``.
+
+    ``frames`` selects observed rows; ``exposure_s=0`` turns exposure integration off.
+    """
+    import ingest
+    from raycast.geometry import PassGeometry
+    from raycast.orbit import Satellite
+    from tests.conftest import TOPEX_PHV
+
+    observed = ingest.read_file(TOPEX_PHV)[0]
+    times = observed.time_utc[frames]
+    exposure = observed.exposure_s if exposure_s is None else exposure_s
+    pass_geometry = PassGeometry.compute(Satellite.from_tle(observed.tle), observed.site, times, exposure_s=exposure)
+    return pass_geometry.body_frame(attitude)
+
+
+def rms_mag(a, b):
+    """RMS magnitude difference of two positive intensity arrays."""
+    return float(np.sqrt(np.mean((2.5 * np.log10(np.asarray(a) / np.asarray(b))) ** 2)))
