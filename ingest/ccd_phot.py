@@ -36,7 +36,7 @@ import numpy as np
 from ingest import elements
 from ingest.observation import Pass
 from ingest.reduction import fit_note, fit_reduction, sign_corrected_mag
-from ingest.table import Column, Rows, read_rows
+from ingest.table import ELEVATION, POSITIVE_RANGE, Column, Rows, check_rows, read_rows
 from ingest.textfile import TextFile
 from ingest.times import NS_PER_S, date_days, julian_date_ns, time_of_day_ns, to_datetime64
 from raycast.site import DERENIVKA, Site
@@ -430,22 +430,15 @@ def _check_increasing(text: TextFile, rows: Rows, stamps_ns: np.ndarray) -> None
 
 def _check_values(text: TextFile, rows: Rows, columns: tuple[Column, ...]) -> None:
     """Physical bounds: positive flux and range, elevation within +-90, non-negative errors."""
-    checks = (
+    check_rows(text, rows, columns, (
         ("flux", lambda v: v > 0, "is not positive: ccd_phot never writes such a row because its magnitude "
                                   "would be undefined; remove the row or fix the value"),
         ("flux_err", lambda v: v >= 0, "is negative; an error must be zero or positive"),
         ("mag_err", lambda v: v >= 0, "is negative; an error must be zero or positive"),
-        ("el_deg", lambda v: np.abs(v) <= 90, "is not an elevation in degrees (-90..90)"),
+        ELEVATION,
         ("az_deg", lambda v: (v >= -360) & (v <= 360), "is not an azimuth in degrees"),
-        ("range_km", lambda v: v > 0, "is not a positive range"),
-    )
-    for key, good, reason in checks:
-        bad = np.flatnonzero(~good(rows[key]))
-        if len(bad):
-            line = int(rows.line[bad[0]])
-            index = [c.key for c in columns].index(key)
-            token = text.line(line).split()[index]
-            raise text.error(line, f"{_column(columns, key).label} {token} {reason}")
+        POSITIVE_RANGE,
+    ))
     median_km = float(np.median(rows["range_km"]))
     if median_km < _MIN_RANGE_KM:
         raise text.error(int(rows.line[0]), f"the range column's median is {median_km:g}, so it is not in km as "

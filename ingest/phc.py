@@ -45,7 +45,7 @@ import numpy as np
 from ingest import elements
 from ingest.observation import Pass
 from ingest.reduction import fit_note, fit_reduction, sign_corrected_mag
-from ingest.table import Column, Rows, read_rows
+from ingest.table import ELEVATION, POSITIVE_RANGE, Column, Rows, check_rows, read_rows
 from ingest.textfile import TextFile
 from ingest.times import NS_PER_DAY, NS_PER_S, time_of_day_ns, to_datetime64
 from raycast.site import UZHHOROD
@@ -275,16 +275,9 @@ def _stamps(text: TextFile, rows: Rows, midnight_ns: int, start_tod_ns: int) -> 
 
 
 def _check_geometry(text: TextFile, rows: Rows) -> None:
-    keys = [c.key for c in PHC_COLUMNS]
-    for key, good, reason in (
-        ("el_deg", lambda v: np.abs(v) <= 90, "is not an elevation in degrees (-90..90)"),
-        ("range_km", lambda v: v > 0, "is not a positive range"),
-        ("sky_b", lambda v: v >= 0, "is negative; a sky count cannot be"),
-        ("sky_v", lambda v: v >= 0, "is negative; a sky count cannot be"),
-    ):
-        bad = np.flatnonzero(~good(rows[key]))
-        if len(bad):
-            line = int(rows.line[bad[0]])
-            index = keys.index(key)
-            token = text.line(line).split()[index]
-            raise text.error(line, f"{PHC_COLUMNS[index].label} {token} {reason}")
+    negative_sky = "is negative; a sky count cannot be"
+    check_rows(text, rows, PHC_COLUMNS, (
+        ELEVATION, POSITIVE_RANGE,
+        ("sky_b", lambda v: v >= 0, negative_sky),
+        ("sky_v", lambda v: v >= 0, negative_sky),
+    ))

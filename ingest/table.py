@@ -14,7 +14,7 @@ import numpy as np
 
 from ingest.textfile import TextFile
 
-__all__ = ["Column", "Rows", "read_rows"]
+__all__ = ["Column", "Rows", "read_rows", "check_rows", "ELEVATION", "POSITIVE_RANGE"]
 
 
 @dataclass(frozen=True)
@@ -88,6 +88,29 @@ def read_rows(text: TextFile, first_line: int, columns: tuple[Column, ...]) -> R
     rows = Rows({c.key: np.ascontiguousarray(values[c.key]) for c in columns}, nonblank.astype(np.int64))
     _check_finite(text, rows, columns)
     return rows
+
+
+def check_rows(text: TextFile, rows: Rows, columns: tuple[Column, ...], checks) -> None:
+    """Raise at the first row whose value fails its check, quoting the value as written.
+
+    Parameters
+    ----------
+    checks : iterable of (key, predicate, reason)
+        `predicate` maps the (n,) column to a bool array (True = good); `reason` completes the
+        sentence "<label> <value> <reason>".
+    """
+    keys = [c.key for c in columns]
+    for key, good, reason in checks:
+        bad = np.flatnonzero(~good(rows[key]))
+        if len(bad):
+            line = int(rows.line[bad[0]])
+            index = keys.index(key)
+            raise text.error(line, f"{columns[index].label} {text.line(line).split()[index]} {reason}")
+
+
+# Checks shared by the formats' geometry columns.
+ELEVATION = ("el_deg", lambda v: np.abs(v) <= 90, "is not an elevation in degrees (-90..90)")
+POSITIVE_RANGE = ("range_km", lambda v: v > 0, "is not a positive range")
 
 
 def _check_finite(text: TextFile, rows: Rows, columns: tuple[Column, ...]) -> None:
