@@ -36,9 +36,11 @@ import numpy as np
 from ingest import elements
 from ingest.observation import Pass
 from ingest.reduction import fit_note, fit_reduction, sign_corrected_mag
-from ingest.table import ELEVATION, POSITIVE_RANGE, Column, Rows, check_rows, read_rows
+from ingest.table import (
+    ELEVATION, POSITIVE_RANGE, Column, Rows, check_increasing, check_parsed, check_rows, read_rows,
+)
 from ingest.textfile import TextFile
-from ingest.times import NS_PER_S, date_days, julian_date_ns, time_of_day_ns, to_datetime64
+from ingest.times import NS_PER_DAY, NS_PER_S, date_days, julian_date_ns, time_of_day_ns, to_datetime64
 from raycast.site import DERENIVKA, Site
 
 __all__ = ["CcdPhotReader", "stamp_offset_s", "MID_EXPOSURE_SINCE", "UT_COLUMNS", "JD_COLUMNS"]
@@ -159,7 +161,6 @@ class CcdPhotReader:
         stamps_ns = _stamps(text, rows, header.variant)
         shift_s, stamps = stamp_offset_s(to_datetime64(stamps_ns[:1])[0], exposure_s, time_format[0])
         time_ns = stamps_ns + int(round(shift_s * NS_PER_S))
-        _check_increasing(text, rows, stamps_ns)
         _check_values(text, rows, columns)
 
         norad, name, cospar = _identity(text, header)
@@ -397,35 +398,19 @@ def _column(columns: tuple[Column, ...], key: str) -> Column:
 
 
 def _stamps(text: TextFile, rows: Rows, variant: str) -> np.ndarray:
-    """The rows' stamps as written, int64 ns since 1970 UTC."""
+    """The rows' stamps as written, int64 ns since 1970 UTC, strictly increasing."""
     if variant == "jd":
         ns, ok = julian_date_ns(rows["jd"])
-        _first_bad(text, rows, ok, "JD", "jd", "is not a Julian date such as 2460746.2300939")
+        check_parsed(text, rows, ok, "jd", "JD", "is not a Julian date such as 2460746.2300939")
+        check_increasing(text, rows, ns, ("jd",))
         return ns
     days, ok_date = date_days(rows["date"])
-    _first_bad(text, rows, ok_date, "Date", "date", "is not a date (YYYY-MM-DD)")
+    check_parsed(text, rows, ok_date, "date", "Date", "is not a date (YYYY-MM-DD)")
     tod, ok_time = time_of_day_ns(rows["ut"])
-    _first_bad(text, rows, ok_time, "UT", "ut", "is not a time of day (HH:MM:SS.fff)")
-    return days * (86_400 * NS_PER_S) + tod
-
-
-def _first_bad(text: TextFile, rows: Rows, ok: np.ndarray, label: str, key: str, reason: str) -> None:
-    bad = np.flatnonzero(~ok)
-    if len(bad):
-        value = rows[key][bad[0]].decode("utf-8", "replace")
-        raise text.error(int(rows.line[bad[0]]), f"{label} {value!r} {reason}")
-
-
-def _check_increasing(text: TextFile, rows: Rows, stamps_ns: np.ndarray) -> None:
-    step = np.diff(stamps_ns)
-    bad = np.flatnonzero(step <= 0)
-    if len(bad):
-        k = int(bad[0])
-        this, previous = to_datetime64(stamps_ns[[k + 1, k]])
-        kind = "repeats" if step[k] == 0 else "is earlier than"
-        raise text.error(int(rows.line[k + 1]), f"time {str(this)[:23]} {kind} the previous row's "
-                                                f"{str(previous)[:23]} (line {int(rows.line[k])}); rows must be "
-                                                "in time order without repeats")
+    check_parsed(text, rows, ok_time, "ut", "UT", "is not a time of day (HH:MM:SS.fff)")
+    ns = days * NS_PER_DAY + tod
+    check_increasing(text, rows, ns, ("date", "ut"))
+    return ns
 
 
 def _check_values(text: TextFile, rows: Rows, columns: tuple[Column, ...]) -> None:

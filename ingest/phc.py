@@ -45,7 +45,9 @@ import numpy as np
 from ingest import elements
 from ingest.observation import Pass
 from ingest.reduction import fit_note, fit_reduction, sign_corrected_mag
-from ingest.table import ELEVATION, POSITIVE_RANGE, Column, Rows, check_rows, read_rows
+from ingest.table import (
+    ELEVATION, POSITIVE_RANGE, Column, Rows, check_increasing, check_parsed, check_rows, read_rows,
+)
 from ingest.textfile import TextFile
 from ingest.times import NS_PER_DAY, NS_PER_S, time_of_day_ns, to_datetime64
 from raycast.site import UZHHOROD
@@ -255,23 +257,13 @@ def _stamps(text: TextFile, rows: Rows, midnight_ns: int, start_tod_ns: int) -> 
     time (the rows before midnight were removed): then it is on the next day.
     """
     tod, ok = time_of_day_ns(rows["ut"])
-    bad = np.flatnonzero(~ok)
-    if len(bad):
-        value = rows["ut"][bad[0]].decode("utf-8", "replace")
-        raise text.error(int(rows.line[bad[0]]), f"UT {value!r} is not a time of day (HH:MM:SS.ffffff)")
-    step = np.diff(tod)
-    rollover = step < -_HALF_DAY_NS
-    backwards = np.flatnonzero((step <= 0) & ~rollover)
-    if len(backwards):
-        k = int(backwards[0])
-        this, previous = (rows["ut"][k + 1].decode(), rows["ut"][k].decode())
-        kind = "repeats" if step[k] == 0 else "is earlier than"
-        raise text.error(int(rows.line[k + 1]), f"time {this} {kind} the previous row's {previous} "
-                                                f"(line {int(rows.line[k])}); rows must be in time order "
-                                                "without repeats")
+    check_parsed(text, rows, ok, "ut", "UT", "is not a time of day (HH:MM:SS.ffffff)")
+    rollover = np.diff(tod) < -_HALF_DAY_NS
     first_day = 1 if tod[0] - start_tod_ns < -_HALF_DAY_NS else 0
     day = first_day + np.concatenate([[0], np.cumsum(rollover)])
-    return midnight_ns + day * NS_PER_DAY + tod
+    stamps_ns = midnight_ns + day * NS_PER_DAY + tod
+    check_increasing(text, rows, stamps_ns, ("ut",))
+    return stamps_ns
 
 
 def _check_geometry(text: TextFile, rows: Rows) -> None:

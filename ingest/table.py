@@ -14,7 +14,7 @@ import numpy as np
 
 from ingest.textfile import TextFile
 
-__all__ = ["Column", "Rows", "read_rows", "check_rows", "ELEVATION", "POSITIVE_RANGE"]
+__all__ = ["Column", "Rows", "read_rows", "check_rows", "check_parsed", "check_increasing", "ELEVATION", "POSITIVE_RANGE"]
 
 
 @dataclass(frozen=True)
@@ -106,6 +106,35 @@ def check_rows(text: TextFile, rows: Rows, columns: tuple[Column, ...], checks) 
             line = int(rows.line[bad[0]])
             index = keys.index(key)
             raise text.error(line, f"{columns[index].label} {text.line(line).split()[index]} {reason}")
+
+
+def check_parsed(text: TextFile, rows: Rows, ok: np.ndarray, key: str, label: str, reason: str) -> None:
+    """Raise at the first row whose text column `key` did not parse (`ok` False), quoting it."""
+    bad = np.flatnonzero(~ok)
+    if len(bad):
+        value = rows[key][bad[0]].decode("utf-8", "replace")
+        raise text.error(int(rows.line[bad[0]]), f"{label} {value!r} {reason}")
+
+
+def check_increasing(text: TextFile, rows: Rows, stamps_ns: np.ndarray, time_keys: tuple[str, ...]) -> None:
+    """Raise at the first row whose time is not after the previous row's.
+
+    Parameters
+    ----------
+    stamps_ns : (n,) int64
+        The rows' times.
+    time_keys : tuple of str
+        The text columns that hold the time, quoted in the message as the file writes them.
+    """
+    step = np.diff(stamps_ns)
+    bad = np.flatnonzero(step <= 0)
+    if len(bad):
+        k = int(bad[0])
+        kind = "repeats" if step[k] == 0 else "is earlier than"
+        this, previous = (" ".join(rows[key][row].decode("utf-8", "replace") for key in time_keys)
+                          for row in (k + 1, k))
+        raise text.error(int(rows.line[k + 1]), f"time {this} {kind} the previous row's {previous} "
+                                                f"(line {int(rows.line[k])}); rows must be in time order without repeats")
 
 
 # Checks shared by the formats' geometry columns.

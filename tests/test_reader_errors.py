@@ -106,14 +106,14 @@ def test_nan_and_inf(tmp_path, lines, index, value, label):
 def test_times_out_of_order(tmp_path, lines):
     lines[FIRST_ROW + 2], lines[FIRST_ROW + 3] = lines[FIRST_ROW + 3], lines[FIRST_ROW + 2]
     assert message(write(tmp_path, lines)) == (
-        ":21: time 2025-01-30T17:36:51.108 is earlier than the previous row's 2025-01-30T17:36:51.208 (line 20); "
+        ":21: time 2025-01-30 17:36:51.108 is earlier than the previous row's 2025-01-30 17:36:51.208 (line 20); "
         "rows must be in time order without repeats")
 
 
 def test_duplicate_time(tmp_path, lines):
     lines.insert(FIRST_ROW + 1, lines[FIRST_ROW])
     assert message(write(tmp_path, lines)) == (
-        ":19: time 2025-01-30T17:36:50.907 repeats the previous row's 2025-01-30T17:36:50.907 (line 18); "
+        ":19: time 2025-01-30 17:36:50.907 repeats the previous row's 2025-01-30 17:36:50.907 (line 18); "
         "rows must be in time order without repeats")
 
 
@@ -133,6 +133,14 @@ def test_bad_date_and_time_tokens(tmp_path, lines):
     lines = [line.replace("17:36:51.208", "17:36:61.208") for line in lines]
     lines[FIRST_ROW] = set_field(lines[FIRST_ROW], 0, "2025-01-30")
     assert message(write(tmp_path, lines)) == ":21: UT '17:36:61.208' is not a time of day (HH:MM:SS.fff)"
+
+
+def test_julian_dates_out_of_order(tmp_path, shared_data):
+    lines = COSMOS2553_JD_PHV.read_text().splitlines()[:24]
+    lines[19], lines[20] = lines[20], lines[19]
+    assert message(write(tmp_path, lines)) == (
+        ":21: time 2460746.23009745 is earlier than the previous row's 2460746.2300986084 (line 20); rows must "
+        "be in time order without repeats")
 
 
 def test_bad_julian_date(tmp_path, shared_data):
