@@ -156,16 +156,15 @@ class CcdPhotReader:
         exposure_s = _exposure(text, header)
         time_format = header.keys.get("Time_format", (None, None))
         _check_time_format_variant(text, header, time_format)
-        rows = read_rows(text, header.column_line + 1, columns)
+        norad, name, cospar = _identity(text, header)
+        band, band_source = _band(text, header)
+        site, site_source = _site(text, header)
 
+        rows = read_rows(text, header.column_line + 1, columns)
         stamps_ns = _stamps(text, rows, header.variant)
         shift_s, stamps = stamp_offset_s(to_datetime64(stamps_ns[:1])[0], exposure_s, time_format[0])
         time_ns = stamps_ns + int(round(shift_s * NS_PER_S))
         _check_values(text, rows, columns)
-
-        norad, name, cospar = _identity(text, header)
-        band, band_source = _band(text, header)
-        site, site_source = _site(text, header)
         flux = rows["flux"]
         mag = rows["mag"]
         saturated = _saturated(text, rows)
