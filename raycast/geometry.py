@@ -507,7 +507,8 @@ class _EarthFrames:
         first_s = float(tt_s.min())
         position = (tt_s - first_s) / NODE_SPACING_S
         cell = np.floor(position).astype("int64")
-        node_cells = np.unique(np.concatenate([cell, cell + 1]))
+        cells = np.unique(cell)
+        node_cells = np.union1d(cells, cells + 1)
         n_nodes = node_cells.shape[0]
         node_tt_s = first_s + NODE_SPACING_S * node_cells
         t = ts.tt_jd(np.full(n_nodes, ref_jd), node_tt_s / 86400.0)
