@@ -535,6 +535,9 @@ class CyclesResult:
         estimate has only passes - 1 degrees of freedom; `noise_rel_rms` pools the frames.
     frame_seconds : (m,) float
         Wall time of each frame's renders and read-back.
+    frame_cpu_seconds : (m,) float
+        CPU time (all of Blender's threads) of the same; less sensitive than wall time to other
+        work on the machine.
     seconds_total : float
         Wall time of the whole call, including Blender start-up and scene construction.
     resolution_px : (m, 2) int
@@ -548,6 +551,7 @@ class CyclesResult:
     intensity_rgb_m2_sr: np.ndarray
     noise_rel: np.ndarray | None
     frame_seconds: np.ndarray
+    frame_cpu_seconds: np.ndarray
     seconds_total: float
     resolution_px: np.ndarray
     pixel_size_m: np.ndarray
@@ -557,6 +561,11 @@ class CyclesResult:
     def seconds_per_frame(self) -> float:
         """Mean wall time per frame, scene construction excluded."""
         return float(self.frame_seconds.mean())
+
+    @property
+    def cpu_seconds_per_frame(self) -> float:
+        """Mean CPU time per frame over all threads, scene construction excluded."""
+        return float(self.frame_cpu_seconds.mean())
 
     @property
     def seconds_setup(self) -> float:
@@ -584,6 +593,8 @@ class NoiseStudy:
         I/E for each samples count, seed and frame.
     seconds_per_frame : (k,) float
         Mean wall time of one frame's render at each samples count.
+    cpu_seconds_per_frame : (k,) float
+        Mean CPU time (all threads) of the same.
     settings : CyclesSettings
         The settings shared by all renders (their `samples` and `seed` are replaced).
     """
@@ -591,6 +602,7 @@ class NoiseStudy:
     samples: np.ndarray
     intensity_m2_sr: np.ndarray
     seconds_per_frame: np.ndarray
+    cpu_seconds_per_frame: np.ndarray
     settings: CyclesSettings
 
     @property
@@ -607,13 +619,14 @@ class NoiseStudy:
         return np.sqrt(np.nanmean(rel**2, axis=1))
 
     def to_markdown(self) -> str:
-        """A Markdown table: samples, pooled relative std, seconds per frame."""
+        """A Markdown table: samples, pooled relative std, wall and CPU seconds per frame."""
         rows = [
-            "| samples/px | relative std of one frame (RMS over frames) | seconds per frame |",
-            "|---:|---:|---:|",
+            "| samples/px | relative std of one frame (RMS over frames) | s/frame (wall) | s/frame (CPU) |",
+            "|---:|---:|---:|---:|",
         ]
-        for samples, rel, seconds in zip(self.samples, self.rel_std_rms, self.seconds_per_frame):
-            rows.append(f"| {samples} | {rel:.2e} | {seconds:.3f} |")
+        for samples, rel, wall, cpu in zip(self.samples, self.rel_std_rms, self.seconds_per_frame,
+                                           self.cpu_seconds_per_frame):
+            rows.append(f"| {samples} | {rel:.2e} | {wall:.3f} | {cpu:.3f} |")
         return "\n".join(rows)
 
 
@@ -662,6 +675,7 @@ def render_cycles(mesh, sun_body, obs_body, settings=None, progress=True) -> Cyc
         intensity_rgb_m2_sr=rgb_passes.mean(axis=0),
         noise_rel=noise_rel,
         frame_seconds=output["frame_seconds"].sum(axis=0),
+        frame_cpu_seconds=output["frame_cpu_seconds"].sum(axis=0),
         seconds_total=seconds_total,
         resolution_px=output["resolution_px"],
         pixel_size_m=output["pixel_size_m"],
@@ -692,9 +706,9 @@ def measure_noise(mesh, sun_body, obs_body, samples=(16, 64, 256), seeds=4, sett
     settings = CyclesSettings() if settings is None else settings
     if not isinstance(settings, CyclesSettings):
         raise TypeError(f"settings is {type(settings).__name__}; give a CyclesSettings")
-    counts = [CyclesSettings(samples=s).samples for s in samples]  # validates each count
-    if not counts:
-        raise ValueError("samples is empty; give at least one samples-per-pixel count")
+    counts = list(samples)
+    if not counts or not all(_is_int(count) and count >= 1 for count in counts):
+        raise ValueError(f"samples={samples!r}; give a non-empty sequence of positive integers (samples per pixel)")
     if not _is_int(seeds) or seeds < 2:
         raise ValueError(f"seeds={seeds!r}; give an integer of at least 2 to measure a spread")
     passes = [(count, seed) for count in counts for seed in range(seeds)]
@@ -702,10 +716,12 @@ def measure_noise(mesh, sun_body, obs_body, samples=(16, 64, 256), seeds=4, sett
     rgb = output["intensity_rgb_m2_sr"]
     channel = rgb.mean(axis=2) if settings.channel == "mean" else rgb[..., _CHANNELS[settings.channel]]
     seconds = output["frame_seconds"].reshape(len(counts), seeds, -1).mean(axis=(1, 2))
+    cpu_seconds = output["frame_cpu_seconds"].reshape(len(counts), seeds, -1).mean(axis=(1, 2))
     return NoiseStudy(
         samples=np.asarray(counts),
         intensity_m2_sr=channel.reshape(len(counts), seeds, -1),
         seconds_per_frame=seconds,
+        cpu_seconds_per_frame=cpu_seconds,
         settings=settings,
     )
 
