@@ -281,7 +281,8 @@ def _finite_array(value, name, shape, dtype):
 
 
 def _shape_text(shape):
-    return "(" + ", ".join("n" if size is None else str(size) for size in shape) + ")"
+    sizes = ["n" if size is None else str(size) for size in shape]
+    return "(" + ", ".join(sizes) + ("," if len(sizes) == 1 else "") + ")"
 
 
 def _checked_material(entry, index):

@@ -186,6 +186,11 @@ def test_bad_geometry_is_refused():
 
 
 def test_bad_settings_are_refused():
+    mesh = plate({"blender_node": "Diffuse BSDF", "color": [0.5, 0.5, 0.5]})
+    with pytest.raises(ValueError, match="seeds=1; give an integer of at least 2"):
+        measure_noise(mesh, PLATE_SUN[:1], PLATE_OBS[:1], seeds=1)
+    with pytest.raises(ValueError, match=re.escape("samples=(16, 0); give a non-empty sequence of positive integers")):
+        measure_noise(mesh, PLATE_SUN[:1], PLATE_OBS[:1], samples=(16, 0))
     with pytest.raises(ValueError, match="samples=60 is not a multiple of noise_passes=8"):
         CyclesSettings(samples=60, noise_passes=8)
     with pytest.raises(ValueError, match="process='gpu'; use one of subprocess, in_process"):
@@ -364,6 +369,20 @@ def test_lambert_sphere_matches_facet_sum_and_phase_law():
     np.testing.assert_allclose(result.intensity_m2_sr[5], facets[5], rtol=3e-3)
     # the project's sphere criterion: 0.3% from the analytic law over 0-150 deg
     np.testing.assert_allclose(result.intensity_m2_sr, lambert_sphere_law(1.0, albedo, phase_rad), rtol=3e-3)
+
+
+@pytest.mark.cycles
+def test_both_runners_give_the_same_floats():
+    mesh = plate({"blender_node": "Glossy BSDF", "color": [0.8] * 3, "roughness": 0.3})
+    results = [render_cycles(mesh, PLATE_SUN[:2], PLATE_OBS[:2], CyclesSettings(samples=8, resolution=32, process=process),
+                             progress=False) for process in ("subprocess", "in_process")]
+    np.testing.assert_array_equal(results[0].intensity_rgb_m2_sr, results[1].intensity_rgb_m2_sr)
+    assert results[0].noise_rel is None and results[0].noise_rel_rms is None
+    # a different seed is an independent render: same value within noise, not the same floats
+    other = render_cycles(mesh, PLATE_SUN[:2], PLATE_OBS[:2], CyclesSettings(samples=8, resolution=32, seed=1),
+                          progress=False)
+    assert not np.array_equal(other.intensity_m2_sr, results[0].intensity_m2_sr)
+    np.testing.assert_allclose(other.intensity_m2_sr, results[0].intensity_m2_sr, rtol=1e-2)  # ~1e-3 noise at 8 spp, 32 px
 
 
 # ---------------------------------------------------------------------------------------------
