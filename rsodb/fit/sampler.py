@@ -203,13 +203,38 @@ class _Evaluator:
             self.log_prob, self.cost, self.map = _worker_log_prob, _worker_cost, self.pool.map
 
 
-def _open_pool(posterior, processes: int):
+@dataclass(eq=False)
+class _ProcessPool:
+    """A process pool with the ``map(fn, iterable)`` emcee and scipy call.
+
+    Built on `concurrent.futures.ProcessPoolExecutor` rather than `multiprocessing.Pool`: when
+    a worker dies (e.g. the kernel's out-of-memory killer), the executor raises
+    ``BrokenProcessPool`` instead of waiting forever for the lost result.
+    """
+
+    executor: Any
+    processes: int
+
+    def map(self, fn: Callable, iterable) -> list:
+        items = list(iterable)
+        # One chunk per worker: a batch of walkers costs one round trip per process.
+        chunk = max(1, math.ceil(len(items) / self.processes))
+        return list(self.executor.map(fn, items, chunksize=chunk))
+
+    def close(self) -> None:
+        self.executor.shutdown(wait=True, cancel_futures=True)
+
+
+def _open_pool(posterior, processes: int) -> _ProcessPool | None:
     if processes <= 1:
         return None
+    from concurrent.futures import ProcessPoolExecutor
+
     # spawn, not fork: the parent may hold threads (tqdm, Dask, Open3D) that fork would copy
     # in a locked state.
-    context = multiprocessing.get_context("spawn")
-    return context.Pool(processes, initializer=_install_worker, initargs=(posterior,))
+    executor = ProcessPoolExecutor(processes, mp_context=multiprocessing.get_context("spawn"),
+                                   initializer=_install_worker, initargs=(posterior,))
+    return _ProcessPool(executor, processes)
 
 
 # -- initialisation -----------------------------------------------------------------------
@@ -431,7 +456,6 @@ def run_sampler(posterior, settings: SamplerSettings, chain_path: str | Path, *,
     finally:
         if pool is not None:
             pool.close()
-            pool.join()
     elapsed = time.perf_counter() - started
 
     chain, log_prob, acceptance = read_chain(chain_path)

@@ -1,0 +1,276 @@
+"""Fit configuration: a TOML file (or dict) with the model, data selection, likelihood,
+parameters and sampler settings of a fit.
+
+Every key is optional; `FitConfig()` is the default fit (the published model's five
+parameters plus a jitter term, spin-period prior +-1% around the stored period, 20 walkers x
+500 steps started from a global search). An example, with the defaults written out::
+
+    name = "default"              # the fit's name in the archive (several fits per pass)
+    discard = 250                 # burn-in steps dropped from the summary (default: half)
+
+    [model]
+    shape = "auto"                # auto (by NORAD number, else "ellipsoid") | topex | cosmos2502 | box | ellipsoid
+    attitude = "precessing"       # precessing | inertial | torque_free
+    spin_axis = "z"               # body axis that spins (precessing, inertial)
+    renderer = "cached"           # cached (fast path) | direct (slow reference)
+    accuracy_mag = 0.01           # accuracy asked of the cache
+    n_sub = 0                     # exposure sub-samples per frame; 0 = from exposure and period
+
+    [data]
+    start_s = 0.0                 # fit the samples from start_s ...
+    duration_s = 0.0              # ... for duration_s seconds (0 = to the end of the pass)
+    stride = 1                    # keep every stride-th sample
+    keep_saturated = false
+    mag_err_floor = 0.0           # errors below this are raised to it (mag)
+
+    [likelihood]
+    kind = "gaussian"             # gaussian | normalised (the published comparison)
+    offset = "marginalised"       # marginalised | none
+
+    [parameters]                  # a number fixes a parameter; a table sets its prior
+    spin_period_s = { from = "periods", width = 0.01, multiple = 1.0, frame = "sidereal" }
+    precession_period_s = { kind = "uniform", low = 50.0, high = 5000.0 }
+    precession_angle_deg = { kind = "normal", mean = 35.0, sigma = 10.0, low = 0.0, high = 90.0 }
+    jitter_mag = { kind = "uniform", low = 0.0, high = 0.5 }
+    panel_pitch_deg = 12.0        # an articulation of the shape, fixed
+    # roughness = { kind = "uniform", low = 0.1, high = 0.8 }   # material scalars, optional
+
+    [sampler]
+    n_walkers = 20
+    n_steps = 500
+    init = "search"               # search (differential evolution, then a small ball) | prior
+    processes = 1                 # 0 = one per core
+    seed = 0
+
+Parameters not named keep their defaults: the attitude family's parameters with the priors of
+`rsodb.fit.parameters.KNOWN` (the spin period from the periods result), ``jitter_mag`` free
+on [0, 0.5] mag (gaussian likelihood only), the shape's articulations fixed at its defaults.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, replace
+import math
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any, Mapping
+
+from rsodb.fit.likelihood import LIKELIHOODS, OFFSET_MODES
+from rsodb.fit.model import ATTITUDES
+from rsodb.fit.parameters import KNOWN, Parameter, ParameterSpace
+from rsodb.fit.priors import Uniform, prior_from_dict
+from rsodb.fit.sampler import SamplerSettings
+from rsodb.fit.shapes import SHAPES
+
+__all__ = ["FitConfig", "ModelConfig", "DataConfig", "LikelihoodConfig", "PERIODS_PRIOR"]
+
+# The default spin-period prior: +-1% around the stored (sidereal) period.
+PERIODS_PRIOR = MappingProxyType({"from": "periods", "width": 0.01, "multiple": 1.0, "frame": "sidereal"})
+DEFAULT_JITTER_PRIOR = Uniform(0.0, 0.5)
+
+
+def _check_keys(section: str, record: Mapping, allowed) -> None:
+    unknown = sorted(set(record) - set(allowed))
+    if unknown:
+        raise ValueError(f"fit configuration [{section}] has unknown keys {unknown}; allowed: {', '.join(allowed)}")
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    """The forward model: shape, attitude family and renderer."""
+
+    shape: str = "auto"
+    attitude: str = "precessing"
+    spin_axis: str = "z"
+    renderer: str = "cached"
+    accuracy_mag: float = 0.01
+    n_sub: int = 0
+
+    def __post_init__(self):
+        if self.shape != "auto" and self.shape not in SHAPES:
+            raise ValueError(f"[model] shape={self.shape!r} is not auto or one of {', '.join(SHAPES)}")
+        if self.attitude not in ATTITUDES:
+            raise ValueError(f"[model] attitude={self.attitude!r} is not one of {', '.join(ATTITUDES)}")
+        if self.spin_axis not in ("x", "y", "z"):
+            raise ValueError(f"[model] spin_axis={self.spin_axis!r} must be 'x', 'y' or 'z'")
+        if self.renderer not in ("cached", "direct"):
+            raise ValueError(f"[model] renderer={self.renderer!r} must be 'cached' or 'direct'")
+        if not (isinstance(self.n_sub, int) and 0 <= self.n_sub <= 64):
+            raise ValueError(f"[model] n_sub={self.n_sub!r} must be a whole number 0..64 (0 chooses it)")
+        if not (isinstance(self.accuracy_mag, (int, float)) and 0 < self.accuracy_mag < 1):
+            raise ValueError(f"[model] accuracy_mag={self.accuracy_mag!r} must be a small positive number of magnitudes")
+
+    @property
+    def attitude_settings(self) -> dict:
+        return {"spin_axis": self.spin_axis} if "spin_axis" in ATTITUDES[self.attitude].settings else {}
+
+
+@dataclass(frozen=True)
+class DataConfig:
+    """Which samples of the pass are fitted."""
+
+    start_s: float = 0.0
+    duration_s: float = 0.0
+    stride: int = 1
+    keep_saturated: bool = False
+    mag_err_floor: float = 0.0
+
+    def __post_init__(self):
+        for name in ("start_s", "duration_s", "mag_err_floor"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise ValueError(f"[data] {name}={value!r} must be a number >= 0")
+        if not (isinstance(self.stride, int) and self.stride >= 1):
+            raise ValueError(f"[data] stride={self.stride!r} must be a whole number >= 1")
+
+
+@dataclass(frozen=True)
+class LikelihoodConfig:
+    """How model and data are compared (`rsodb.fit.likelihood`)."""
+
+    kind: str = "gaussian"
+    offset: str = "marginalised"
+
+    def __post_init__(self):
+        if self.kind not in LIKELIHOODS:
+            raise ValueError(f"[likelihood] kind={self.kind!r} is not one of {', '.join(LIKELIHOODS)}")
+        if self.offset not in OFFSET_MODES:
+            raise ValueError(f"[likelihood] offset={self.offset!r} is not one of {', '.join(OFFSET_MODES)}")
+
+
+def _check_parameter_spec(name: str, spec) -> None:
+    if name not in KNOWN:
+        raise ValueError(f"[parameters] {name!r} is not a known parameter; known: {', '.join(KNOWN)}")
+    if isinstance(spec, bool) or not isinstance(spec, (int, float, Mapping)):
+        raise ValueError(f"[parameters] {name} = {spec!r} must be a number (fixed) or a table (prior)")
+    if isinstance(spec, (int, float)) and not math.isfinite(spec):
+        raise ValueError(f"[parameters] {name} = {spec!r} must be a finite number")
+    if isinstance(spec, Mapping) and "from" in spec:
+        if spec["from"] != "periods" or name != "spin_period_s":
+            raise ValueError(f"[parameters] {name}: only spin_period_s can take its prior from = \"periods\"")
+        _check_keys(f"parameters.{name}", spec, ("from", "width", "multiple", "frame"))
+    elif isinstance(spec, Mapping):
+        prior = prior_from_dict(spec, name)
+        Parameter(name, prior)  # checks wrap windows of angles
+
+
+@dataclass(frozen=True)
+class FitConfig:
+    """Everything that defines a fit (see the module docstring for the TOML form)."""
+
+    name: str = "default"
+    model: ModelConfig = field(default_factory=ModelConfig)
+    data: DataConfig = field(default_factory=DataConfig)
+    likelihood: LikelihoodConfig = field(default_factory=LikelihoodConfig)
+    parameters: Mapping[str, Any] = field(default_factory=dict)
+    sampler: SamplerSettings = field(default_factory=SamplerSettings)
+    discard: int | None = None
+
+    def __post_init__(self):
+        if not isinstance(self.name, str) or not self.name:
+            raise ValueError(f"fit name {self.name!r} must be a non-empty string")
+        for name, spec in dict(self.parameters).items():
+            _check_parameter_spec(name, spec)
+        object.__setattr__(self, "parameters", MappingProxyType(dict(self.parameters)))
+        if self.discard is not None and not (isinstance(self.discard, int) and 0 <= self.discard < self.sampler.n_steps):
+            raise ValueError(f"discard={self.discard!r} must be a whole number below n_steps={self.sampler.n_steps}")
+
+    def __reduce__(self):
+        return _config_from_dict, (self.to_dict(),)
+
+    # -- construction ---------------------------------------------------------------------------
+    @classmethod
+    def from_dict(cls, record: Mapping) -> "FitConfig":
+        """Build from the dict form (what `tomllib` returns)."""
+        sections = {"model": ModelConfig, "data": DataConfig, "likelihood": LikelihoodConfig}
+        _check_keys("top level", record, ("name", "discard", "parameters", "sampler", *sections))
+        kwargs: dict[str, Any] = {k: record[k] for k in ("name", "discard") if k in record}
+        for key, cls_ in sections.items():
+            section = record.get(key, {})
+            _check_keys(key, section, cls_.__dataclass_fields__)
+            kwargs[key] = cls_(**section)
+        sampler = record.get("sampler", {})
+        _check_keys("sampler", sampler, SamplerSettings.__dataclass_fields__)
+        kwargs["sampler"] = SamplerSettings(**sampler)
+        kwargs["parameters"] = dict(record.get("parameters", {}))
+        return cls(**kwargs)
+
+    @classmethod
+    def from_toml(cls, path: str | Path) -> "FitConfig":
+        """Read a TOML fit configuration."""
+        import tomllib
+
+        path = Path(path)
+        try:
+            with open(path, "rb") as handle:
+                record = tomllib.load(handle)
+        except FileNotFoundError:
+            raise FileNotFoundError(f"fit configuration {path} does not exist; give the path of a .toml file") from None
+        except tomllib.TOMLDecodeError as error:
+            raise ValueError(f"{path}: not valid TOML ({error})") from None
+        try:
+            return cls.from_dict(record)
+        except (TypeError, ValueError) as error:
+            raise ValueError(f"{path}: {error}") from None
+
+    def to_dict(self) -> dict:
+        """The dict form (JSON/TOML-friendly)."""
+        return {"name": self.name, "discard": self.discard, "model": asdict(self.model), "data": asdict(self.data),
+                "likelihood": asdict(self.likelihood), "parameters": dict(self.parameters),
+                "sampler": self.sampler.to_dict()}
+
+    def replace(self, **changes) -> "FitConfig":
+        """A copy with top-level fields changed; ``sampler=`` may be a dict of sampler changes."""
+        if isinstance(changes.get("sampler"), Mapping):
+            changes["sampler"] = self.sampler.replace(**changes["sampler"])
+        return replace(self, **changes)
+
+    # -- the parameter space ------------------------------------------------------------------
+    def parameter_specs(self, shape_articulations: Mapping[str, float]) -> dict[str, Any]:
+        """Every parameter's spec (defaults overlaid with the configured ones), model order."""
+        specs: dict[str, Any] = {}
+        for name in ATTITUDES[self.model.attitude].parameters:
+            specs[name] = dict(PERIODS_PRIOR) if name == "spin_period_s" else "default"
+        specs.update(shape_articulations)
+        if self.likelihood.kind == "gaussian":
+            specs["jitter_mag"] = DEFAULT_JITTER_PRIOR.to_dict()
+        specs.update(self.parameters)
+        return specs
+
+    def parameter_space(self, shape_articulations: Mapping[str, float], periods=None) -> ParameterSpace:
+        """Resolve the specs into a `ParameterSpace`.
+
+        Parameters
+        ----------
+        shape_articulations : mapping of str to float
+            The shape's articulation parameters with their default values.
+        periods : rsodb.periods.PeriodResult or None
+            The stored period, needed when spin_period_s takes its prior from it.
+        """
+        free, fixed = [], {}
+        for name, spec in self.parameter_specs(shape_articulations).items():
+            if isinstance(spec, (int, float)):
+                fixed[name] = float(spec)
+            elif spec == "default":
+                free.append(Parameter.default(name))
+            elif "from" in spec:
+                free.append(Parameter(name, _period_prior(spec, periods)))
+            else:
+                free.append(Parameter(name, prior_from_dict(spec, name)))
+        return ParameterSpace(tuple(free), fixed)
+
+
+def _period_prior(spec: Mapping, periods) -> Uniform:
+    if periods is None:
+        raise ValueError(
+            "spin_period_s takes its prior from the stored period but the pass has none; run "
+            "'rsodb periods' on it first, or give spin_period_s a prior in the fit configuration")
+    width = float(spec.get("width", PERIODS_PRIOR["width"]))
+    multiple = float(spec.get("multiple", PERIODS_PRIOR["multiple"]))
+    if not (math.isfinite(multiple) and multiple > 0):
+        raise ValueError(f"[parameters] spin_period_s: multiple={multiple!r} must be a positive number (e.g. 2 for 2P)")
+    prior = periods.prior(width_frac=width, frame=spec.get("frame", PERIODS_PRIOR["frame"]))
+    return Uniform(prior.low * multiple, prior.high * multiple)
+
+
+def _config_from_dict(record):
+    return FitConfig.from_dict(record)

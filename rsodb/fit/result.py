@@ -1,0 +1,384 @@
+"""The outcome of a fit: posterior summary, best-fit light curve, diagnostics, chain pointer.
+
+A `FitResult` is what the archive keeps for a pass (``archive.store_result(pass_id, "fits",
+name, result)``). It is built from a sampler run with `FitResult.from_run` and written with
+`to_hdf5` into an h5py group laid out for plain h5py and pandas:
+
+``attrs``
+    ``schema_version``, ``kind = "fit"``, identity (``pass_id``, ``name``), ``likelihood``,
+    scalar statistics (``offset_mag``, ``jitter_mag``, ``residual_rms_mag``, ``chi2``,
+    ``reduced_chi2``, ``dof``), diagnostics (``n_steps``, ``n_walkers``, ``discard``,
+    ``converged``, ``verdict``), ``chain_path``, ``elapsed_s``, ``n_evaluations``,
+    ``created_utc``, and JSON strings ``space``, ``config``, ``init``, ``flags``.
+``summary``
+    One row per free parameter: ``name``, ``median``, ``p16``, ``p84``, ``best``,
+    ``autocorr_time`` (the paper's Table 1 plus diagnostics).
+``lightcurve``
+    Per fitted sample: ``time_utc`` (int64 ns since 1970), ``mag_obs``, ``mag_err``,
+    ``mag_model`` (best fit, the marginalised offset applied).
+``samples``
+    Up to `MAX_STORED_SAMPLES` posterior draws (after burn-in, thinned evenly), so the
+    archive keeps a posterior even if the chain file is removed.
+``acceptance_fraction``
+    Per walker.
+
+The summary uses circular statistics for wrapped angles (see
+`ParameterSpace.wrap_samples`): the median is reduced into the prior window and the 16/84
+percentiles are on the same unrolled branch, so ``p16 <= median <= p84`` may exceed the
+window by up to half a period.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+import json
+import math
+from typing import Any, Mapping
+
+import numpy as np
+
+from rsodb.fit.parameters import KNOWN, ParameterSpace
+
+__all__ = ["FitResult", "SCHEMA_VERSION", "MAX_STORED_SAMPLES", "assess_convergence"]
+
+SCHEMA_VERSION = 1
+MAX_STORED_SAMPLES = 4000
+# emcee's guidance: trust autocorrelation times, and the posterior, when the chain is at
+# least ~50 of them long.
+MIN_AUTOCORR_LENGTHS = 50
+# Stretch-move acceptance is healthy in roughly 0.2-0.5; far outside, walkers are stuck or
+# the proposal scale is wrong.
+ACCEPTANCE_RANGE = (0.15, 0.7)
+# A model whose best fit misses the data by more than this many quoted errors (reduced chi2
+# with the observed errors alone) is flagged as not describing them.
+MISFIT_REDUCED_CHI2 = 2.0
+
+
+def assess_convergence(n_kept: int, autocorr_time: np.ndarray, acceptance: np.ndarray) -> tuple[bool, str]:
+    """(converged, one-line verdict) from the kept chain length, tau per parameter and acceptance.
+
+    Parameters
+    ----------
+    n_kept : int
+        Steps kept after burn-in.
+    autocorr_time : (ndim,) float
+        Integrated autocorrelation time per parameter, steps.
+    acceptance : (n_walkers,) float
+        Acceptance fraction per walker.
+    """
+    tau = float(np.nanmax(autocorr_time)) if np.any(np.isfinite(autocorr_time)) else math.inf
+    lengths = n_kept / tau if tau > 0 else math.inf
+    mean_acceptance = float(np.mean(acceptance))
+    stuck = int(np.sum(acceptance < 0.05))
+    problems = []
+    if lengths < MIN_AUTOCORR_LENGTHS:
+        problems.append(f"the kept chain is only {lengths:.1f} autocorrelation times long "
+                        f"({MIN_AUTOCORR_LENGTHS} wanted; tau = {tau:.0f} steps)")
+    low, high = ACCEPTANCE_RANGE
+    if not low <= mean_acceptance <= high:
+        problems.append(f"mean acceptance {mean_acceptance:.2f} is outside {low}-{high}")
+    if stuck:
+        problems.append(f"{stuck} walker(s) accepted under 5% of proposals (stuck)")
+    if problems:
+        return False, "not converged: " + "; ".join(problems) + ". Run more steps (a rerun resumes the chain)."
+    return True, (f"converged: the kept chain is {lengths:.0f} autocorrelation times long (tau = {tau:.0f} steps), "
+                  f"mean acceptance {mean_acceptance:.2f}")
+
+
+def _json(value) -> str:
+    return json.dumps(value, sort_keys=True, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o))
+
+
+@dataclass(frozen=True, eq=False)
+class FitResult:
+    """Posterior summary and best fit of one spin-state fit of one pass.
+
+    Attributes
+    ----------
+    pass_id, name : str
+        The pass and the fit's name in the archive.
+    space : ParameterSpace
+        Free parameters (with priors) and fixed values.
+    likelihood : str
+        ``"gaussian"`` or ``"normalised"``.
+    median, p16, p84, best : (ndim,) float
+        Posterior median, 16th and 84th percentiles, and the highest-posterior sample.
+    best_log_prob : float
+    autocorr_time : (ndim,) float
+        Per parameter, steps, measured on the kept part of the chain.
+    acceptance_fraction : (n_walkers,) float
+    n_steps, n_walkers, discard : int
+        Chain length, ensemble size and burn-in steps dropped from the summary.
+    converged : bool
+    verdict : str
+        One line explaining `converged`.
+    flags : tuple of str
+        Warnings for the reader (model misfit, stuck walkers, ...).
+    time_utc : (n,) datetime64[ns]
+        Fitted samples.
+    mag_obs, mag_err, mag_model : (n,) float
+        Observed magnitudes and errors, best-fit model with the offset applied.
+    offset_mag, jitter_mag : float
+        Offset and jitter at the best fit (0 where not fitted).
+    residual_rms_mag : float
+        RMS of observed minus best-fit model magnitudes.
+    chi2, dof : float, int
+        chi2 of the best fit with the observed errors alone, and degrees of freedom
+        (samples - free parameters - offset).
+    samples : (m, ndim) float
+        Posterior draws kept in the archive (wrapped angles unrolled).
+    chain_path : str
+        The emcee HDFBackend file holding the full chain.
+    elapsed_s : float
+    n_evaluations : int
+    init : mapping
+        How the walkers started.
+    config : mapping
+        The configuration that produced the fit.
+    created_utc : str
+    """
+
+    pass_id: str
+    name: str
+    space: ParameterSpace
+    likelihood: str
+    median: np.ndarray
+    p16: np.ndarray
+    p84: np.ndarray
+    best: np.ndarray
+    best_log_prob: float
+    autocorr_time: np.ndarray
+    acceptance_fraction: np.ndarray
+    n_steps: int
+    n_walkers: int
+    discard: int
+    converged: bool
+    verdict: str
+    flags: tuple[str, ...]
+    time_utc: np.ndarray
+    mag_obs: np.ndarray
+    mag_err: np.ndarray
+    mag_model: np.ndarray
+    offset_mag: float
+    jitter_mag: float
+    residual_rms_mag: float
+    chi2: float
+    dof: int
+    samples: np.ndarray
+    chain_path: str
+    elapsed_s: float
+    n_evaluations: int
+    init: Mapping[str, Any] = field(default_factory=dict)
+    config: Mapping[str, Any] = field(default_factory=dict)
+    created_utc: str = ""
+
+    def __post_init__(self):
+        for name in ("median", "p16", "p84", "best", "autocorr_time", "acceptance_fraction", "mag_obs",
+                     "mag_err", "mag_model", "samples"):
+            value = np.array(getattr(self, name), dtype=float)
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+        times = np.array(self.time_utc, dtype="datetime64[ns]")
+        times.setflags(write=False)
+        object.__setattr__(self, "time_utc", times)
+        object.__setattr__(self, "flags", tuple(self.flags))
+
+    # -- views ------------------------------------------------------------------------------
+    @property
+    def names(self) -> tuple[str, ...]:
+        return self.space.names
+
+    @property
+    def reduced_chi2(self) -> float:
+        """chi2 / dof of the best fit with the observed errors alone (NaN without dof)."""
+        return self.chi2 / self.dof if self.dof > 0 else math.nan
+
+    @property
+    def residuals_mag(self) -> np.ndarray:
+        """(n,) observed minus best-fit model."""
+        return self.mag_obs - self.mag_model
+
+    @property
+    def t_s(self) -> np.ndarray:
+        """(n,) seconds since the first fitted sample."""
+        return (self.time_utc - self.time_utc[0]) / np.timedelta64(1, "s")
+
+    def values(self, which: str = "median") -> dict[str, float]:
+        """``{name: value}`` of `which` (``median``, ``best``, ``p16``, ``p84``) plus fixed values."""
+        if which not in ("median", "best", "p16", "p84"):
+            raise ValueError(f"which={which!r} must be median, best, p16 or p84")
+        values = dict(self.space.fixed)
+        values.update(zip(self.names, (float(v) for v in getattr(self, which))))
+        return values
+
+    def table(self) -> str:
+        """The posterior as a text table: median with -/+ errors per parameter."""
+        rows = [f"{'parameter':<22} {'median':>12} {'-err':>10} {'+err':>10}   best"]
+        for i, name in enumerate(self.names):
+            unit = KNOWN[name].unit
+            rows.append(f"{name:<22} {self.median[i]:12.5g} {self.median[i] - self.p16[i]:10.3g} "
+                        f"{self.p84[i] - self.median[i]:10.3g}   {self.best[i]:.5g} {unit}")
+        for name, value in self.space.fixed.items():
+            rows.append(f"{name:<22} {value:12.5g} {'(fixed)':>10}")
+        rows.append(f"residual RMS {self.residual_rms_mag:.3f} mag, reduced chi2 {self.reduced_chi2:.2f} "
+                    f"(observed errors), jitter {self.jitter_mag:.3f} mag, offset {self.offset_mag:+.3f} mag")
+        rows.append(self.verdict)
+        rows.extend(f"warning: {flag}" for flag in self.flags)
+        return "\n".join(rows)
+
+    def to_dict(self) -> dict:
+        """JSON-friendly summary (no per-sample arrays)."""
+        return {
+            "pass_id": self.pass_id, "name": self.name, "likelihood": self.likelihood,
+            "parameters": {n: {"median": float(self.median[i]), "p16": float(self.p16[i]),
+                               "p84": float(self.p84[i]), "best": float(self.best[i]),
+                               "autocorr_time": float(self.autocorr_time[i])}
+                           for i, n in enumerate(self.names)},
+            "fixed": dict(self.space.fixed),
+            "offset_mag": self.offset_mag, "jitter_mag": self.jitter_mag,
+            "residual_rms_mag": self.residual_rms_mag, "chi2": self.chi2, "dof": self.dof,
+            "reduced_chi2": self.reduced_chi2, "n_samples": int(self.mag_obs.size),
+            "n_steps": self.n_steps, "n_walkers": self.n_walkers, "discard": self.discard,
+            "mean_acceptance": float(np.mean(self.acceptance_fraction)),
+            "converged": self.converged, "verdict": self.verdict, "flags": list(self.flags),
+            "chain_path": self.chain_path, "elapsed_s": self.elapsed_s, "n_evaluations": self.n_evaluations,
+            "start_utc": str(self.time_utc[0]), "created_utc": self.created_utc,
+        }
+
+    # -- construction ---------------------------------------------------------------------------
+    @classmethod
+    def from_run(cls, run, posterior, *, pass_id: str, name: str, time_utc, discard: int | None = None,
+                 config: Mapping | None = None) -> "FitResult":
+        """Summarise a `ChainRun` of `posterior`.
+
+        Parameters
+        ----------
+        run : ChainRun
+        posterior : Posterior
+            The posterior that was sampled (for the best-fit light curve).
+        pass_id, name : str
+        time_utc : (n,) datetime64
+            Times of the fitted samples.
+        discard : int, optional
+            Burn-in steps to drop; default half the chain.
+        config : mapping, optional
+            The fit configuration, stored for provenance.
+        """
+        from emcee.autocorr import integrated_time
+
+        space = posterior.space
+        n_steps = run.n_steps
+        discard = n_steps // 2 if discard is None else int(discard)
+        if not 0 <= discard < n_steps:
+            raise ValueError(f"discard={discard} must be within 0..{n_steps - 1} (the chain has {n_steps} steps)")
+        kept = run.chain[discard:]
+        flat = space.wrap_samples(kept.reshape(-1, space.ndim))
+        p16, median, p84 = np.percentile(flat, [16, 50, 84], axis=0)
+        median_wrapped = space.wrap(median)
+        shift = median_wrapped - median
+        tau = integrated_time(kept, tol=0) if kept.shape[0] > 1 else np.full(space.ndim, np.nan)
+
+        best_index = np.unravel_index(np.argmax(run.log_prob), run.log_prob.shape)
+        best = space.wrap(run.chain[best_index])
+        values = space.values(best)
+        likelihood = posterior.likelihood
+        jitter = float(values.get("jitter_mag", 0.0))
+        model_mag = posterior.model.magnitudes(values)
+        offset = likelihood.offset_mag(model_mag, jitter)
+        mag_model = model_mag + offset
+        residuals = likelihood.mag_obs - mag_model
+        chi2 = float(np.sum((residuals / likelihood.mag_err) ** 2))
+        dof = int(residuals.size - space.ndim - likelihood.n_free_nuisance)
+
+        converged, verdict = assess_convergence(kept.shape[0], tau, run.acceptance_fraction)
+        flags = []
+        if likelihood.kind == "gaussian" and dof > 0 and chi2 / dof > MISFIT_REDUCED_CHI2:
+            median_err = float(np.median(likelihood.mag_err))
+            flags.append(
+                f"model misfit: the best fit leaves residuals of RMS {np.sqrt(np.mean(residuals ** 2)):.3f} mag "
+                f"against a median quoted error of {median_err:.3f} mag (reduced chi2 {chi2 / dof:.1f}); "
+                + (f"the jitter term ({jitter:.3f} mag) absorbs the difference, so the intervals "
+                   "describe this model's best compromise, not the object" if "jitter_mag" in space.names
+                   else "without a jitter term the intervals are too narrow"))
+        if likelihood.kind == "normalised":
+            flags.append("normalised comparison (the published workflow's): observed errors are ignored "
+                         "and the intervals are not calibrated")
+
+        stride = max(1, math.ceil(flat.shape[0] / MAX_STORED_SAMPLES))
+        return cls(
+            pass_id=pass_id, name=name, space=space, likelihood=likelihood.kind,
+            median=median_wrapped, p16=p16 + shift, p84=p84 + shift, best=best,
+            best_log_prob=float(run.log_prob[best_index]), autocorr_time=tau,
+            acceptance_fraction=run.acceptance_fraction, n_steps=n_steps, n_walkers=run.n_walkers,
+            discard=discard, converged=converged, verdict=verdict, flags=tuple(flags),
+            time_utc=time_utc, mag_obs=likelihood.mag_obs, mag_err=likelihood.mag_err, mag_model=mag_model,
+            offset_mag=float(offset), jitter_mag=jitter, residual_rms_mag=float(np.sqrt(np.mean(residuals ** 2))),
+            chi2=chi2, dof=dof, samples=flat[::stride], chain_path=run.chain_path, elapsed_s=run.elapsed_s,
+            n_evaluations=int(run.n_walkers * run.steps_run + run.init.get("evaluations", 0)),
+            init=dict(run.init), config=dict(config or {}),
+            created_utc=datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
+        )
+
+    # -- HDF5 ---------------------------------------------------------------------------------
+    def to_hdf5(self, group) -> None:
+        """Write into an h5py group (layout in the module docstring)."""
+        attrs = group.attrs
+        attrs["schema_version"] = SCHEMA_VERSION
+        attrs["kind"] = "fit"
+        for key in ("pass_id", "name", "likelihood", "verdict", "chain_path", "created_utc"):
+            attrs[key] = getattr(self, key)
+        for key in ("best_log_prob", "offset_mag", "jitter_mag", "residual_rms_mag", "chi2", "elapsed_s"):
+            attrs[key] = float(getattr(self, key))
+        attrs["reduced_chi2"] = float(self.reduced_chi2)
+        for key in ("dof", "n_steps", "n_walkers", "discard", "n_evaluations"):
+            attrs[key] = int(getattr(self, key))
+        attrs["converged"] = bool(self.converged)
+        attrs["space"] = _json(self.space.to_dict())
+        attrs["config"] = _json(self.config)
+        attrs["init"] = _json(self.init)
+        attrs["flags"] = _json(list(self.flags))
+        width = max(len(n) for n in self.names)
+        summary = np.zeros(len(self.names), dtype=[("name", f"S{width}"), ("median", "f8"), ("p16", "f8"),
+                                                   ("p84", "f8"), ("best", "f8"), ("autocorr_time", "f8")])
+        summary["name"] = [n.encode() for n in self.names]
+        for key in ("median", "p16", "p84", "best", "autocorr_time"):
+            summary[key] = getattr(self, key)
+        group.create_dataset("summary", data=summary)
+        curve = np.zeros(self.mag_obs.size, dtype=[("time_utc", "i8"), ("mag_obs", "f8"), ("mag_err", "f8"),
+                                                   ("mag_model", "f8")])
+        curve["time_utc"] = self.time_utc.view("i8")
+        curve["mag_obs"], curve["mag_err"], curve["mag_model"] = self.mag_obs, self.mag_err, self.mag_model
+        group.create_dataset("lightcurve", data=curve, compression="gzip")
+        group.create_dataset("samples", data=self.samples, compression="gzip")
+        group.create_dataset("acceptance_fraction", data=self.acceptance_fraction)
+
+    @classmethod
+    def from_hdf5(cls, group) -> "FitResult":
+        """Read what `to_hdf5` wrote."""
+        attrs = group.attrs
+        version = int(attrs.get("schema_version", -1))
+        if version != SCHEMA_VERSION:
+            raise ValueError(f"fit record {group.name} has schema_version {version}; this rsodb reads "
+                             f"{SCHEMA_VERSION} (refit the pass or upgrade rsodb)")
+
+        def text(key):
+            value = attrs[key]
+            return value.decode() if isinstance(value, bytes) else str(value)
+
+        summary = group["summary"][...]
+        curve = group["lightcurve"][...]
+        return cls(
+            pass_id=text("pass_id"), name=text("name"), space=ParameterSpace.from_dict(json.loads(text("space"))),
+            likelihood=text("likelihood"), median=summary["median"], p16=summary["p16"], p84=summary["p84"],
+            best=summary["best"], best_log_prob=float(attrs["best_log_prob"]),
+            autocorr_time=summary["autocorr_time"], acceptance_fraction=group["acceptance_fraction"][...],
+            n_steps=int(attrs["n_steps"]), n_walkers=int(attrs["n_walkers"]), discard=int(attrs["discard"]),
+            converged=bool(attrs["converged"]), verdict=text("verdict"), flags=tuple(json.loads(text("flags"))),
+            time_utc=curve["time_utc"].view("datetime64[ns]"), mag_obs=curve["mag_obs"],
+            mag_err=curve["mag_err"], mag_model=curve["mag_model"], offset_mag=float(attrs["offset_mag"]),
+            jitter_mag=float(attrs["jitter_mag"]), residual_rms_mag=float(attrs["residual_rms_mag"]),
+            chi2=float(attrs["chi2"]), dof=int(attrs["dof"]), samples=group["samples"][...],
+            chain_path=text("chain_path"), elapsed_s=float(attrs["elapsed_s"]),
+            n_evaluations=int(attrs["n_evaluations"]), init=json.loads(text("init")),
+            config=json.loads(text("config")), created_utc=text("created_utc"),
+        )

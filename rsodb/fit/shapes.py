@@ -1,0 +1,249 @@
+"""Shapes a fit can use, and how their brightness function is built once per fit.
+
+``SHAPES`` maps a name to a `Shape`: how to build the `raycast.scene.Scene` (or, for the
+analytic ``box``, a `ConvexFacets`), which articulation parameters it has and their default
+values. `brightness_for` turns a shape and the fit's free parameters into the object the
+forward model calls at every step, ``intensity(sun_body, obs_body, **parameters)``:
+
+``renderer="cached"`` (default)
+    `raycast.cache.SceneCache`, built once. A free articulation parameter (e.g. TOPEX's
+    ``panel_pitch_deg``) gets an articulation grid over its prior's range; a fixed one is
+    baked into the scene.
+``renderer="direct"``
+    `raycast.direct.DirectRenderer`: the slow reference, for checks.
+
+Material scalars (``albedo_scale``, ``roughness``) are not parameters of the cache: the cache
+holds geometry and visibility, and evaluates each material's BRDF at run time. `MaterialScalars`
+therefore swaps the scene's BRDFs for rescaled copies (``Scene.with_brdfs``) before each call,
+which changes no precomputed table. The cache's glint sampling (element size along smooth
+normals, solar-disk samples) is chosen from the smoothest roughness the prior allows.
+
+Caches are kept per process (`functools.lru_cache`), so fitting many passes of one object in
+one worker builds the shape's cache once.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+import functools
+import math
+from types import MappingProxyType
+from typing import Any, Callable, Mapping
+
+import numpy as np
+
+from rsodb.fit.model import ConvexFacets
+
+__all__ = ["Shape", "SHAPES", "AUTO_SHAPES", "MATERIAL_PARAMETERS", "MaterialScalars", "brightness_for",
+           "shape_for_norad"]
+
+MATERIAL_PARAMETERS = ("albedo_scale", "roughness")
+# Articulation grid points per degree of a free articulation's prior range (at least 3).
+_GRID_PER_DEG = 0.5
+
+
+@dataclass(frozen=True)
+class Shape:
+    """A named model.
+
+    Attributes
+    ----------
+    build : callable
+        ``build() -> Scene`` (or ``ConvexFacets`` when `analytic`).
+    articulations : mapping of str to float
+        Articulation parameters and their default (fixed) values.
+    analytic : bool
+        True for closed-form convex bodies, which need no renderer.
+    description : str
+    """
+
+    build: Callable
+    articulations: Mapping[str, float]
+    analytic: bool
+    description: str
+
+
+def _topex():
+    from raycast.models import topex
+
+    return topex.build()
+
+
+def _cosmos2502():
+    from raycast.models import cosmos2502
+
+    return cosmos2502.build()
+
+
+def _box():
+    return ConvexFacets.box((1.0, 1.0, 2.0), albedo=0.2)
+
+
+def _ellipsoid():
+    return ConvexFacets.ellipsoid((1.0, 0.5, 0.35), subdivisions=2, albedo=0.2)
+
+
+SHAPES: Mapping[str, Shape] = MappingProxyType({
+    "topex": Shape(_topex, {"panel_pitch_deg": 12.0}, False,
+                   "TOPEX/Poseidon: bus, solar array (pitch 12 deg per the published fit), antennas"),
+    "cosmos2502": Shape(_cosmos2502, {}, False, "COSMOS 2502 (Lotos-S1): the published workflow's model"),
+    "box": Shape(_box, {}, True, "a 1 x 1 x 2 m Lambertian box along body z, albedo 0.2 (analytic)"),
+    "ellipsoid": Shape(_ellipsoid, {}, True,
+                       "a Lambertian triaxial ellipsoid, semi-axes 1 x 0.5 x 0.35 m along body x, y, z, albedo 0.2, "
+                       "320 facets (analytic; the generic shape for objects without a model: spinning about z "
+                       "it tumbles end over end)"),
+})
+
+# Objects whose model the project has, by NORAD number.
+AUTO_SHAPES: Mapping[int, str] = MappingProxyType({22076: "topex", 40358: "cosmos2502"})
+
+
+def shape_for_norad(norad: int, fallback: str | None = "ellipsoid") -> str:
+    """The shape name for an object: its own model when known, else `fallback`."""
+    if norad in AUTO_SHAPES:
+        return AUTO_SHAPES[norad]
+    if fallback is None:
+        raise ValueError(
+            f"no model of NORAD {norad} is known (known: {', '.join(f'{k} {v}' for k, v in AUTO_SHAPES.items())}); "
+            f"name a shape in the fit configuration ([model] shape = one of {', '.join(SHAPES)})")
+    return fallback
+
+
+def _rescaled_brdf(brdf, albedo_scale: float, roughness: float | None):
+    from raycast.brdf import GGX, Lambertian, Principled
+
+    if isinstance(brdf, Lambertian):
+        return replace(brdf, albedo=brdf.albedo * albedo_scale)
+    if isinstance(brdf, GGX):
+        return replace(brdf, color=brdf.color * albedo_scale,
+                       roughness=brdf.roughness if roughness is None else roughness)
+    if isinstance(brdf, Principled):
+        return replace(brdf, base_color=brdf.base_color * albedo_scale,
+                       roughness=brdf.roughness if roughness is None else roughness)
+    raise TypeError(f"cannot rescale a {type(brdf).__name__} BRDF; fix albedo_scale and roughness for this shape")
+
+
+def _max_reflectance(brdf) -> float:
+    return float(max(getattr(brdf, name, 0.0) for name in ("albedo", "color", "base_color")))
+
+
+@dataclass(frozen=True, eq=False)
+class MaterialScalars:
+    """A renderer whose scene's materials are rescaled at each call.
+
+    Parameters
+    ----------
+    renderer : SceneCache or DirectRenderer
+        Anything with ``scene`` and ``intensity(sun_body, obs_body, **articulation)``.
+    parameters : tuple of str
+        Which of ``albedo_scale`` (factor on every reflectance) and ``roughness`` (replaces
+        every glossy roughness) are passed at run time.
+    """
+
+    renderer: Any
+    parameters: tuple[str, ...]
+
+    def supports(self, values: Mapping[str, float]) -> bool:
+        """False where a reflectance would exceed 1 or the roughness leave [0.01, 1]."""
+        scale = values.get("albedo_scale", 1.0)
+        brightest = max(_max_reflectance(b) for b in self.renderer.scene.brdfs if b is not None)
+        roughness = values.get("roughness", 0.5)
+        return 0 <= scale * brightest <= 1 and 0.01 <= roughness <= 1
+
+    def intensity(self, sun_body, obs_body, albedo_scale: float = 1.0, roughness: float | None = None,
+                  **articulation):
+        scene = self.renderer.scene
+        brdfs = {name: _rescaled_brdf(brdf, albedo_scale, roughness)
+                 for name, brdf in zip(scene.material_names, scene.brdfs) if brdf is not None}
+        renderer = replace(self.renderer, scene=scene.with_brdfs(**brdfs))
+        return renderer.intensity(sun_body, obs_body, **articulation)
+
+
+@functools.lru_cache(maxsize=4)
+def _cached_scene_cache(shape: str, fixed: tuple, grid: tuple, smoothest_roughness: float | None,
+                        accuracy_mag: float, progress: bool):
+    from raycast.cache import SceneCache
+
+    scene = SHAPES[shape].build()
+    if fixed:
+        scene = scene.with_parameters(**dict(fixed))
+    options = {}
+    if smoothest_roughness is not None:
+        from raycast.direct import sun_samples_for
+
+        smooth = scene.with_brdfs(**{n: _rescaled_brdf(b, 1.0, smoothest_roughness)
+                                     for n, b in zip(scene.material_names, scene.brdfs) if b is not None})
+        alpha = smoothest_roughness ** 2
+        options = {"normal_step_deg": float(np.clip(math.degrees(alpha) / 2.0, 0.5, 3.0)),
+                   "sun_samples": sun_samples_for(smooth, accuracy_mag)}
+    articulation_grid = {name: list(values) for name, values in grid} or None
+    return SceneCache.build(scene, accuracy_mag=accuracy_mag, articulation_grid=articulation_grid,
+                            progress=progress, **options)
+
+
+def brightness_for(shape: str, free_bounds: Mapping[str, tuple[float, float]], fixed: Mapping[str, float], *,
+                   renderer: str = "cached", accuracy_mag: float = 0.01, pixel_size_m: float = 0.05,
+                   progress: bool = False):
+    """The brightness function of a shape for a fit.
+
+    Parameters
+    ----------
+    shape : str
+        A key of `SHAPES`.
+    free_bounds : mapping of str to (low, high)
+        Prior ranges of the free brightness parameters (articulations, material scalars).
+    fixed : mapping of str to float
+        Values of the fixed brightness parameters.
+    renderer : {"cached", "direct"}
+        Fast path or reference renderer (ignored by analytic shapes).
+    accuracy_mag : float
+        Accuracy asked of the cache.
+    pixel_size_m : float
+        Ray spacing of the direct renderer.
+    progress : bool
+        Progress bar while the cache is built.
+
+    Returns
+    -------
+    (brightness, parameters)
+        The object with ``intensity(sun_body, obs_body, **parameters)`` and the names of the
+        parameters the forward model must pass to it (every articulation of the shape, free
+        or fixed, and the material scalars in use).
+    """
+    if shape not in SHAPES:
+        raise ValueError(f"unknown shape {shape!r}; use one of {', '.join(SHAPES)}")
+    spec = SHAPES[shape]
+    allowed = set(spec.articulations) | set(MATERIAL_PARAMETERS)
+    names = set(free_bounds) | set(fixed)
+    unknown = sorted(names - allowed)
+    if unknown:
+        raise ValueError(f"shape {shape!r} has no parameters {unknown}; it has {', '.join(sorted(allowed))}")
+    materials = tuple(n for n in MATERIAL_PARAMETERS if n in names)
+    articulation_free = {n: b for n, b in free_bounds.items() if n in spec.articulations}
+    articulation_fixed = {n: float(fixed.get(n, default)) for n, default in spec.articulations.items()
+                          if n not in articulation_free}
+    if spec.analytic:
+        if materials:
+            raise ValueError(f"shape {shape!r} is analytic and has no material parameters; remove {list(materials)}")
+        return spec.build(), ()
+    if renderer == "cached":
+        grid = tuple((name, tuple(np.linspace(low, high, max(3, int(math.ceil((high - low) * _GRID_PER_DEG)) + 1))))
+                     for name, (low, high) in sorted(articulation_free.items()))
+        smoothest = None
+        if "roughness" in free_bounds:
+            smoothest = float(free_bounds["roughness"][0])
+        elif "roughness" in fixed:
+            smoothest = float(fixed["roughness"])
+        base = _cached_scene_cache(shape, tuple(sorted(articulation_fixed.items())), grid, smoothest,
+                                   float(accuracy_mag), bool(progress))
+    elif renderer == "direct":
+        from raycast.direct import DirectRenderer
+
+        scene = spec.build().with_parameters(**articulation_fixed) if articulation_fixed else spec.build()
+        base = DirectRenderer(scene, pixel_size_m, 1)
+    else:
+        raise ValueError(f"renderer={renderer!r} must be 'cached' or 'direct'")
+    # Fixed articulations are passed too (the cache checks them against the scene it was built for).
+    parameters = tuple(sorted(spec.articulations)) + materials
+    if materials:
+        return MaterialScalars(base, materials), parameters
+    return base, parameters
