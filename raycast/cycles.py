@@ -65,7 +65,8 @@ _DISTRIBUTIONS = {
     "Glossy BSDF": ("GGX", "MULTI_GGX", "BECKMANN", "ASHIKHMIN_SHIRLEY"),
     "Principled BSDF": ("GGX", "MULTI_GGX"),
 }
-_CHANNELS = {"r": 0, "g": 1, "b": 2}
+# Colour channel standing for the band, named as in raycast.materials ("green" for V).
+_CHANNELS = {"red": 0, "green": 1, "blue": 2}
 
 
 # --------------------------------------------------------------------------------------------
@@ -207,7 +208,9 @@ class CyclesMesh:
         Polygons are split into triangle fans. Faces in a smoothing group (``s 1``, ``s on``,
         any ``s N`` with N > 0) take the file's ``vn`` normals per corner, as Blender's importer
         does; faces outside one (``s 0``, ``s off``) or without ``vn`` are flat. Every ``usemtl``
-        name must have an entry under ``"materials"`` in the JSON.
+        name must have an entry under ``"materials"`` in the JSON. A Principled entry without
+        ``ior`` takes the material's ``Ni`` from the OBJ's ``mtllib`` (Blender's exporter writes
+        the Principled IOR there) when it is above 1, as `raycast.materials` does; else 1.5.
 
         Parameters
         ----------
@@ -225,11 +228,18 @@ class CyclesMesh:
                 f"material {unknown[0]!r} used in {path} has no entry in {materials_json}; "
                 "add it under \"materials\""
             )
+        materials = []
+        for name in parsed["material_names"]:
+            entry = dict(table[name])
+            mtl_ior = parsed["mtl_ior"].get(name, 0.0)
+            if entry.get("blender_node") == "Principled BSDF" and "ior" not in entry and mtl_ior > 1.0:
+                entry["ior"] = mtl_ior
+            materials.append(entry)
         return cls(
             vertices_m=parsed["vertices_m"],
             triangles=parsed["triangles"],
             material_index=parsed["material_index"],
-            materials=tuple(table[name] for name in parsed["material_names"]),
+            materials=tuple(materials),
             corner_normals=parsed["corner_normals"],
             material_names=tuple(parsed["material_names"]),
         )
@@ -356,7 +366,7 @@ def _parse_obj(path):
         raise FormatError(path, None, f"cannot read the OBJ file ({error.strerror})") from None
     positions, normals = [], []
     corners, corner_normal_ids, face_material, face_smooth = [], [], [], []
-    material_names, material_of = [], {}
+    material_names, material_of, mtl_ior = [], {}, {}
     current_material, smooth = None, False
     for line_number, raw in enumerate(text.splitlines(), start=1):
         words = raw.split("#", 1)[0].split()
@@ -375,6 +385,8 @@ def _parse_obj(path):
                     material_names.append(current_material)
             elif keyword == "s":
                 smooth = bool(args) and args[0].lower() not in ("0", "off")
+            elif keyword == "mtllib" and args:
+                mtl_ior.update(_read_mtl_ior(path.parent / " ".join(args)))
             elif keyword == "f":
                 if len(args) < 3:
                     _bad("a face needs at least three vertices")
@@ -404,7 +416,27 @@ def _parse_obj(path):
         "material_index": np.asarray(face_material, dtype=np.int64),
         "corner_normals": corner_normals,
         "material_names": material_names,
+        "mtl_ior": mtl_ior,
     }
+
+
+def _read_mtl_ior(path):
+    """``{material: Ni}`` from a .mtl file; an absent file gives {} (Blender's importer only warns)."""
+    try:
+        lines = path.read_text(errors="replace").splitlines()
+    except OSError:
+        return {}
+    ior, current = {}, None
+    for line_number, raw in enumerate(lines, start=1):
+        words = raw.split("#", 1)[0].split()
+        if len(words) >= 2 and words[0] == "newmtl":
+            current = " ".join(words[1:])
+        elif len(words) >= 2 and words[0] == "Ni" and current is not None:
+            try:
+                ior[current] = float(words[1])
+            except ValueError:
+                raise FormatError(path, line_number, f"Ni {words[1]!r} is not a number") from None
+    return ior
 
 
 def _bad(reason):
@@ -459,10 +491,11 @@ class CyclesSettings:
         Angular diameter of the Sun lamp's disk.
     threads : int or None
         CPU threads for Cycles; None uses all cores.
-    channel : {"mean", "r", "g", "b"}
+    channel : {"green", "red", "blue", "mean"}
         Which RGB channel of the rendered I/E becomes `CyclesResult.intensity_m2_sr` (all three
-        are kept in `intensity_rgb_m2_sr`). I/E is linear in the material colours, so "mean"
-        equals a render whose colours are the mean of R, G and B.
+        are kept in `intensity_rgb_m2_sr`); the names and the default (green for the V band)
+        are those of `raycast.materials`. I/E is linear in the material colours, so a channel
+        equals a render whose colours are that channel's values, and "mean" one with the mean.
     noise_passes : int
         Split `samples` over this many renders with distinct seeds per frame (`samples` must be a
         multiple). With 2 or more, `CyclesResult.noise_rel` estimates each frame's relative
@@ -477,7 +510,7 @@ class CyclesSettings:
     seed: int = 0
     sun_angle_deg: float = 0.53
     threads: int | None = None
-    channel: str = "mean"
+    channel: str = "green"
     noise_passes: int = 1
     process: str = "subprocess"
 
@@ -500,7 +533,7 @@ class CyclesSettings:
         ):
             raise ValueError(f"CyclesSettings sun_angle_deg={self.sun_angle_deg!r}; give degrees in [0, 10] (the Sun is 0.53)")
         if self.channel not in ("mean", *_CHANNELS):
-            raise ValueError(f"CyclesSettings channel={self.channel!r}; use 'mean', 'r', 'g' or 'b'")
+            raise ValueError(f"CyclesSettings channel={self.channel!r}; use 'green', 'red', 'blue' or 'mean'")
         if self.samples % self.noise_passes:
             raise ValueError(
                 f"CyclesSettings samples={self.samples} is not a multiple of noise_passes={self.noise_passes}; "
@@ -665,7 +698,7 @@ def render_cycles(mesh, sun_body, obs_body, settings=None, progress=True) -> Cyc
     seconds_total = time.perf_counter() - start
 
     rgb_passes = output["intensity_rgb_m2_sr"]  # (p, m, 3)
-    channel_passes = rgb_passes.mean(axis=2) if settings.channel == "mean" else rgb_passes[..., _CHANNELS[settings.channel]]
+    channel_passes = _channel(rgb_passes, settings.channel)
     intensity = channel_passes.mean(axis=0)
     noise_rel = None
     if settings.noise_passes >= 2:
@@ -715,7 +748,7 @@ def measure_noise(mesh, sun_body, obs_body, samples=(16, 64, 256), seeds=4, sett
     passes = [(count, seed) for count in counts for seed in range(seeds)]
     output = _run(mesh, sun_body, obs_body, settings, passes, progress)
     rgb = output["intensity_rgb_m2_sr"]
-    channel = rgb.mean(axis=2) if settings.channel == "mean" else rgb[..., _CHANNELS[settings.channel]]
+    channel = _channel(rgb, settings.channel)
     seconds = output["frame_seconds"].reshape(len(counts), seeds, -1).mean(axis=(1, 2))
     cpu_seconds = output["frame_cpu_seconds"].reshape(len(counts), seeds, -1).mean(axis=(1, 2))
     return NoiseStudy(
@@ -725,6 +758,11 @@ def measure_noise(mesh, sun_body, obs_body, samples=(16, 64, 256), seeds=4, sett
         cpu_seconds_per_frame=cpu_seconds,
         settings=settings,
     )
+
+
+def _channel(rgb, channel):
+    """(...,) one channel (or the mean) of (..., 3) RGB values."""
+    return rgb.mean(axis=-1) if channel == "mean" else rgb[..., _CHANNELS[channel]]
 
 
 def _run(mesh, sun_body, obs_body, settings, passes, progress):
