@@ -32,6 +32,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from types import MappingProxyType
 
 import numpy as np
 from tqdm.auto import tqdm
@@ -87,8 +88,8 @@ class CyclesMesh:
         Vertex indices of each triangle, counter-clockwise seen from the side its normal faces.
     material_index : (T,) int
         Index into `materials` of each triangle.
-    materials : tuple of dict
-        Entries in the form of the materials JSON (``{"blender_node": "Glossy BSDF", "color":
+    materials : tuple of mapping
+        Read-only entries in the form of the materials JSON (``{"blender_node": "Glossy BSDF", "color":
         [r, g, b], "roughness": 0.3}``); see `MATERIAL_FIELDS` for each node's fields.
     corner_normals : (T, 3, 3) float or None
         Unit shading normal at each corner of each triangle; None shades every face flat with its
@@ -117,7 +118,9 @@ class CyclesMesh:
                 f"triangles refer to vertex {int(triangles.min())}..{int(triangles.max())} but "
                 f"there are {len(vertices)} vertices; use 0-based indices below {len(vertices)}"
             )
-        materials = tuple(_checked_material(entry, index) for index, entry in enumerate(self.materials))
+        materials = tuple(
+            MappingProxyType(_checked_material(entry, index)) for index, entry in enumerate(self.materials)
+        )
         if not materials:
             raise ValueError("materials is empty; give at least one materials-JSON entry")
         material_index = _finite_array(self.material_index, "material_index", (len(triangles),), np.int64)
@@ -324,7 +327,7 @@ def _checked_material(entry, index):
                 raise ValueError(
                     f"material {index} ({kind}) has {key}={value!r}; give three linear RGB values in [0, 1]"
                 )
-            checked[key] = [float(c) for c in color]
+            checked[key] = tuple(float(c) for c in color)
         elif key == "distribution":
             if value not in _DISTRIBUTIONS[kind]:
                 raise ValueError(
@@ -779,7 +782,7 @@ def _run(mesh, sun_body, obs_body, settings, passes, progress):
         "vertices_m": mesh.vertices_m,
         "triangles": mesh.triangles,
         "material_index": mesh.material_index,
-        "materials_json": np.array(json.dumps(list(mesh.materials))),
+        "materials_json": np.array(json.dumps([dict(entry) for entry in mesh.materials])),
         "sun_body": sun,
         "obs_body": obs,
         "passes": np.asarray(passes, dtype=np.int64).reshape(-1, 2),
