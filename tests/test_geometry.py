@@ -173,10 +173,11 @@ def test_sparse_times_years_apart_are_computed_without_a_dense_grid():
 # -- the Sun and the Earth's shadow ----------------------------------------------------------
 @pytest.fixture(scope="module")
 def astropy_offline():
+    """astropy with its bundled IERS tables only (astropy-iers-data): no downloads."""
     from astropy.utils import iers
 
-    iers.conf.auto_download = False
-    return iers
+    with iers.conf.set_temp("auto_download", False):
+        yield iers
 
 
 def test_sun_direction_matches_astropy(astropy_offline):
