@@ -230,6 +230,10 @@ class LightCurve:
         previous = 0.0 if self.trend_mag is None else self.trend_mag
         return replace(self, mag=self.mag - trend, trend_mag=previous + trend, trend_degree=int(degree))
 
+    def replace(self, **changes) -> "LightCurve":
+        """A copy with some fields changed (validated again)."""
+        return replace(self, **changes)
+
     def select(self, mask) -> "LightCurve":
         """The samples where `mask` (n,) is True."""
         mask = np.asarray(mask, bool)

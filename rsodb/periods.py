@@ -382,7 +382,7 @@ class PeriodResult:
         for name in ("verdict", "reason", "synodic_note", "band", "pass_id", "label"):
             attrs[name] = str(getattr(self, name))
         attrs["norad"] = -1 if self.norad is None else int(self.norad)
-        attrs["epoch_utc"] = "" if self.epoch_utc is None else np.datetime_as_string(self.epoch_utc, unit="ns")
+        attrs["epoch_utc"] = "" if self.epoch_utc is None else str(np.datetime_as_string(self.epoch_utc, unit="ns"))
         table = np.array([tuple(getattr(c, f) if f != "label" else c.label.encode() for f in _CANDIDATE_DTYPE.names)
                           for c in self.candidates], dtype=_CANDIDATE_DTYPE)
         group.create_dataset("candidates", data=table)

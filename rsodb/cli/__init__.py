@@ -18,6 +18,8 @@ COMMAND_MODULES = [
     "ls",
     "show",
     "export",
+    "periods",
+    "report",
 ]
 
 
