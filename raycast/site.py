@@ -1,8 +1,8 @@
 """Observing sites: a named point on the WGS84 ellipsoid.
 
 A `Site` is plain data (no skyfield objects), so the ingest package can attach it to a pass
-without importing the geometry machinery. `raycast.geometry` turns it into a skyfield
-topocentre when it needs one.
+without importing the geometry machinery. `Site.itrs_km` (its Earth-fixed position) and
+`Site.enu_itrs` (its local east/north/up axes) are all `raycast.geometry` needs from it.
 """
 from __future__ import annotations
 
