@@ -291,7 +291,7 @@ def _forward_fill(rss: np.ndarray) -> np.ndarray:
     return np.take_along_axis(rss, index, axis=-1)
 
 
-def bic(rss, n_points: int, n_harmonics, trend_degree: int) -> np.ndarray:
+def bic(rss, n_points: int, n_harmonics, trend_degree: int, n_effective: float | None = None) -> np.ndarray:
     """Bayesian information criterion with the noise scale profiled out.
 
     Parameters
@@ -303,14 +303,19 @@ def bic(rss, n_points: int, n_harmonics, trend_degree: int) -> np.ndarray:
     n_harmonics : int or array
         Harmonic counts (broadcast against `rss`).
     trend_degree : int
+    n_effective : float, optional
+        Independent samples when the noise is correlated (default `n_points`). Correlated
+        samples carry less information: the log-likelihood scales by ``n_eff / n`` and the
+        penalty counts ``ln n_eff`` per parameter.
 
     Returns
     -------
     array like `rss`
-        ``n ln(rss / n) + ((d + 1) + 2 K + 1) ln n``; lower is better.
+        ``n_eff ln(rss / n) + ((d + 1) + 2 K + 1) ln n_eff``; lower is better.
     """
+    n_eff = float(n_points if n_effective is None else n_effective)
     n_par = trend_degree + 1 + 2 * np.asarray(n_harmonics) + 1
-    return n_points * np.log(np.asarray(rss) / n_points) + n_par * math.log(n_points)
+    return n_eff * np.log(np.asarray(rss) / n_points) + n_par * math.log(n_eff)
 
 
 def max_harmonics(frequency_hz: float, ceiling_hz: float, n_points: int, trend_degree: int, cap: int) -> int:

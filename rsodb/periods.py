@@ -481,6 +481,14 @@ class _Problem:
     pdm_bin_s: float
     scored: list = field(default_factory=list)
     pdm_within: dict = field(default_factory=dict)    # period_s -> (within SS, occupied bins)
+    n_effective: float | None = None                  # AR(1) effective sample size, once estimated
+
+    def criterion(self, rss, n_harmonics):
+        """BIC of harmonic counts `n_harmonics` with RSS `rss` (effective sample size when known)."""
+        return bic(rss, self.data.n_points, n_harmonics, self.settings.trend_degree, self.n_effective)
+
+    def leader(self) -> "_Scored | None":
+        return min(self.scored, key=lambda s: s.bic) if self.scored else None
 
     def same(self, f_a: float, f_b: float) -> bool:
         """Two frequencies name the same candidate (closer than a quarter of a resolution element)."""
@@ -496,6 +504,8 @@ class _Scored:
     label: str
     start_hz: float
     fit: HarmonicFit
+    k_max: int
+    bic: float          # the criterion used for ranking (effective-sample BIC once known)
 
 
 def _score(problem: _Problem, frequency_hz: float, label: str) -> _Scored | None:
@@ -510,8 +520,7 @@ def _score(problem: _Problem, frequency_hz: float, label: str) -> _Scored | None
     harmonics = np.arange(1, k_max + 1)
 
     def best_count(f: float) -> int:
-        rss = nested_rss(data, f, k_max)[1:]
-        return int(np.argmin(bic(rss, data.n_points, harmonics, s.trend_degree))) + 1
+        return int(np.argmin(problem.criterion(nested_rss(data, f, k_max)[1:], harmonics))) + 1
 
     # The start inherits the error of the Lomb-Scargle peak (up to ~0.15 / T), divided by the
     # multiple: a candidate at f_peak / 4 is known four times better in frequency.
@@ -525,7 +534,36 @@ def _score(problem: _Problem, frequency_hz: float, label: str) -> _Scored | None
         # A refined frequency keeps high harmonics coherent, so the BIC may then want more of them.
         k = k_new
         f = refine_frequency(data, f, k, 0.1 / (k * problem.duration_s), scan_harmonics=scan)
-    return _Scored(label, frequency_hz, fit_harmonics(data, f, k))
+    fit = fit_harmonics(data, f, k)
+    return _Scored(label, frequency_hz, fit, k_max, float(problem.criterion(fit.rss, k)))
+
+
+def _rescore(problem: _Problem, scored: _Scored) -> None:
+    """Choose the harmonic count again and recompute the criterion (after `n_effective` changed)."""
+    f = scored.fit.frequency_hz
+    values = problem.criterion(nested_rss(problem.data, f, scored.k_max)[1:], np.arange(1, scored.k_max + 1))
+    k = int(np.argmin(values)) + 1
+    if k != scored.fit.n_harmonics:
+        scored.fit = fit_harmonics(problem.data, f, k)
+    scored.bic = float(problem.criterion(scored.fit.rss, k))
+
+
+def _meet_neighbours(problem: _Problem) -> None:
+    """Score twice and half the leading candidate until both have been tried."""
+    for _ in range(6):
+        leader = problem.leader()
+        if leader is None:
+            return
+        added = False
+        for factor, tag in ((0.5, "x2"), (2.0, "x0.5")):
+            f = leader.fit.frequency_hz * factor
+            if not problem.known(f):
+                scored = _score(problem, f, f"{leader.label}{tag}")
+                if scored is not None:
+                    problem.scored.append(scored)
+                    added = True
+        if not added:
+            return
 
 
 def _harmonic_sum_peak(frequency_hz: np.ndarray, power: np.ndarray, terms: int) -> float | None:
@@ -649,29 +687,24 @@ def find_period(lightcurve: LightCurve, geometry=None, settings: PeriodSettings 
                 scored = _score(problem, f, _multiple_label(multiple, symbol))
                 if scored is not None:
                     problem.scored.append(scored)
-    # Make sure the leader has met its double and its half.
-    for _ in range(6):
-        leader = min(problem.scored, key=lambda s: s.fit.bic) if problem.scored else None
-        if leader is None:
-            break
-        added = False
-        for factor, tag in ((0.5, "x2"), (2.0, "x0.5")):
-            f = leader.fit.frequency_hz * factor
-            if not problem.known(f):
-                scored = _score(problem, f, f"{leader.label}{tag}")
-                if scored is not None:
-                    problem.scored.append(scored)
-                    added = True
-        if not added:
-            break
+    _meet_neighbours(problem)
+    # Correlated residuals (red noise, or a shape that drifts during the pass) make every extra
+    # harmonic look significant, and multiples of the period fit them best. Re-rank with the
+    # AR(1) effective sample size of the leader's residuals (Bayley & Hammersley 1946).
+    leader = problem.leader()
+    rho = 0.0 if leader is None else min(max(leader.fit.residual_lag1, 0.0), 0.98)
+    if rho > 0.05:
+        problem.n_effective = problem.data.n_points * (1 - rho) / (1 + rho)
+        for scored in problem.scored:
+            _rescore(problem, scored)
+        _meet_neighbours(problem)
     if not problem.scored:
         return _no_result(lc, settings, "too short",
                           f"no candidate period fits in the {duration:.0f} s pass at a {lc.cadence_s:g} s cadence",
                           false_alarm_probability=fap, peak_period_s=1.0 / f_peak)
 
     candidates = _rank(problem)
-    best_scored = min(problem.scored, key=lambda s: s.fit.bic)
-    fit = best_scored.fit
+    fit = problem.leader().fit
     best = candidates[0]
     snr = _signal_to_noise(problem, fit)
     verdict, reason = _verdict(problem, candidates, fap, snr, 1.0 / f_peak)
@@ -700,7 +733,7 @@ def _multiple_label(multiple: float, symbol: str) -> str:
 
 
 def _rank(problem: _Problem) -> tuple[Candidate, ...]:
-    scored = sorted(problem.scored, key=lambda s: s.fit.bic)
+    scored = sorted(problem.scored, key=lambda s: s.bic)
     periods = np.array([s.fit.period_s for s in scored])
     bins = np.maximum(2, np.round(periods / problem.pdm_bin_s)).astype(int)
     theta = dispersion.pdm(problem.data.t_s, problem.y_detrended, periods, bins)
@@ -708,10 +741,10 @@ def _rank(problem: _Problem) -> tuple[Candidate, ...]:
     within, occupied = dispersion.pdm_within(problem.data.t_s, problem.y_detrended, periods, bins)
     problem.pdm_within.update({float(p): (float(w), float(m)) for p, w, m in zip(periods, within, occupied)})
     strings = dispersion.string_length(problem.data.t_s, problem.y_detrended, periods)
-    best_bic = scored[0].fit.bic
+    best_bic = scored[0].bic
     return tuple(
         Candidate(period_s=s.fit.period_s, uncertainty_s=s.fit.period_err_s, label=s.label,
-                  n_harmonics=s.fit.n_harmonics, bic=s.fit.bic, delta_bic=s.fit.bic - best_bic,
+                  n_harmonics=s.fit.n_harmonics, bic=s.bic, delta_bic=s.bic - best_bic,
                   pdm_theta=float(theta[i]), pdm_bic=float(binned_bic[i]), string_length=float(strings[i]),
                   n_cycles=problem.duration_s / s.fit.period_s)
         for i, s in enumerate(scored)
