@@ -28,3 +28,7 @@ class FormatError(ValueError):
         self.reason = reason
         where = f"{self.path}:{line}" if line is not None else self.path
         super().__init__(f"{where}: {reason}")
+
+    def __reduce__(self):
+        # Errors cross process pools (ingest workers, Dask); rebuild from the three fields.
+        return type(self), (self.path, self.line, self.reason)

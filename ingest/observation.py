@@ -6,6 +6,7 @@ period search and fitting read it. It is immutable; operations return new object
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from types import MappingProxyType
 from typing import Mapping
 
 import numpy as np
@@ -192,6 +193,21 @@ class Pass:
             raise ValueError(f"{path} holds {len(passes)} passes (bands {bands}); use ingest.read_file(path) "
                              "to get all of them")
         return passes[0]
+
+    # Headers and OMM records are read-only mappings (MappingProxyType), which pickle cannot
+    # send to another process; they travel as plain dicts and are frozen again on arrival.
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        for name in ("header", "omm"):
+            if isinstance(state.get(name), MappingProxyType):
+                state[name] = dict(state[name])
+        return state
+
+    def __setstate__(self, state):
+        for name in ("header", "omm"):
+            if isinstance(state.get(name), dict):
+                state[name] = MappingProxyType(state[name])
+        self.__dict__.update(state)
 
     # -- derived views -------------------------------------------------------------------
     def __len__(self) -> int:

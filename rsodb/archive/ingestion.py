@@ -10,14 +10,12 @@ objects grow), and whenever the passes waiting in memory exceed `_MAX_PENDING_BY
 """
 from __future__ import annotations
 
-import copyreg
 import hashlib
 import os
 import time
 from collections import deque
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
-from types import MappingProxyType
 from typing import TYPE_CHECKING, Callable
 
 from ingest.errors import FormatError
@@ -40,19 +38,9 @@ _READ_AHEAD_CHUNKS_PER_WORKER = 32
 _known_sha256: frozenset[str] = frozenset()
 
 
-def _read_only_mapping(items: dict) -> MappingProxyType:
-    return MappingProxyType(items)
-
-
-def _pickle_mappingproxy(proxy: MappingProxyType):
-    return _read_only_mapping, (dict(proxy),)
-
-
 def _init_worker(known_sha256: frozenset[str]) -> None:
     global _known_sha256
     _known_sha256 = known_sha256
-    # Readers freeze headers as read-only mappings, which pickle cannot send back by default.
-    copyreg.pickle(MappingProxyType, _pickle_mappingproxy)
 
 
 def read_observation_file(path: str, known_sha256: frozenset[str] = frozenset()):
@@ -97,10 +85,7 @@ def read_observation_file(path: str, known_sha256: frozenset[str] = frozenset())
 
 
 def _read_chunk(paths: list[str]):
-    # FormatError does not survive pickling (its constructor takes three arguments), so errors
-    # travel back from the worker as their fields.
-    return [(path, sha, passes, None if error is None else (error.path, error.line, error.reason))
-            for path, sha, passes, error in (read_observation_file(path, _known_sha256) for path in paths)]
+    return [read_observation_file(path, _known_sha256) for path in paths]
 
 
 def _auto_workers(n_files: int) -> int:
@@ -128,8 +113,7 @@ def _results(files: list[Path], known: frozenset[str], workers: int):
                 while len(queued) < window and next_chunk < len(chunks):
                     queued.append(pool.submit(_read_chunk, chunks[next_chunk]))
                     next_chunk += 1
-                for path, sha, passes, error in queued.popleft().result():
-                    yield path, sha, passes, None if error is None else FormatError(*error)
+                yield from queued.popleft().result()
         finally:
             for future in queued:
                 future.cancel()
