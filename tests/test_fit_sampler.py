@@ -162,7 +162,7 @@ def test_search_start_puts_every_walker_in_the_true_mode_of_a_multimodal_posteri
 
 def test_posterior_widths_match_the_fisher_matrix(tmp_path):
     posterior = make_posterior()
-    settings = SamplerSettings(n_walkers=16, n_steps=600, init="search", search_maxiter=20, seed=3)
+    settings = SamplerSettings(n_walkers=16, n_steps=600, init="search", search_maxiter=20, search_popsize=6, seed=3)
     run = run_sampler(posterior, settings, tmp_path / "fisher.h5", progress=False)
     samples = run.chain[200:].reshape(-1, 2)
     period, phase = samples[:, 0], samples[:, 1]

@@ -252,11 +252,11 @@ class ParameterSpace:
 
     # -- records --------------------------------------------------------------------------
     def to_dict(self) -> dict:
-        """Plain dict form (JSON/TOML-friendly)."""
-        return {"free": {p.name: p.prior.to_dict() for p in self.free}, "fixed": dict(self.fixed)}
+        """Plain dict form (JSON/TOML-friendly); ``free`` is a list, so the vector order survives."""
+        return {"free": [{"name": p.name, "prior": p.prior.to_dict()} for p in self.free], "fixed": dict(self.fixed)}
 
     @classmethod
     def from_dict(cls, record: Mapping) -> "ParameterSpace":
         """Inverse of `to_dict`."""
-        free = tuple(Parameter(name, prior_from_dict(prior, name)) for name, prior in record["free"].items())
+        free = tuple(Parameter(item["name"], prior_from_dict(item["prior"], item["name"])) for item in record["free"])
         return cls(free, dict(record.get("fixed", {})))

@@ -68,6 +68,9 @@ class FitProblem:
     posterior : Posterior
     time_utc : (n,) datetime64[ns]
         The fitted samples.
+    search_posterior : Posterior
+        The same posterior on at most ``config.sampler.search_points`` samples without
+        exposure sub-samples, for the global search that starts the walkers.
     """
 
     pass_id: str
@@ -75,6 +78,7 @@ class FitProblem:
     shape: str
     posterior: Posterior
     time_utc: np.ndarray
+    search_posterior: Posterior
 
     @classmethod
     def build(cls, observed, config: FitConfig, periods=None, *, progress: bool = False) -> "FitProblem":
@@ -116,21 +120,30 @@ class FitProblem:
             raise ValueError(f"pass {pass_id} carries no TLE or OMM, so its geometry cannot be computed")
         # The fastest spin the prior allows sets the exposure sub-sampling (2 deg per sub-sample).
         period_guess = dict(space.fixed, **{p.name: p.prior.low for p in space.free}).get("spin_period_s")
-        geometry = PassGeometry.compute(satellite, observed.site, observed.time_utc[chosen], observed.exposure_s,
-                                        n_sub=config.model.n_sub or None,
-                                        spin_period_s=period_guess if period_guess else None)
-        model = SpinStateModel(geometry, brightness, config.model.attitude, config.model.attitude_settings,
-                               brightness_parameters, observed.band, reference_range_km(observed))
-        err = np.maximum(observed.mag_err[chosen], config.data.mag_err_floor)
-        likelihood = make_likelihood(config.likelihood.kind, observed.best_mag[chosen], err, config.likelihood.offset)
-        return cls(pass_id, config, shape, Posterior(space, model, likelihood), observed.time_utc[chosen])
+
+        def posterior_on(index: np.ndarray, n_sub: int | None) -> Posterior:
+            geometry = PassGeometry.compute(satellite, observed.site, observed.time_utc[index], observed.exposure_s,
+                                            n_sub=n_sub, spin_period_s=period_guess if period_guess else None)
+            model = SpinStateModel(geometry, brightness, config.model.attitude, config.model.attitude_settings,
+                                   brightness_parameters, observed.band, reference_range_km(observed))
+            err = np.maximum(observed.mag_err[index], config.data.mag_err_floor)
+            likelihood = make_likelihood(config.likelihood.kind, observed.best_mag[index], err,
+                                         config.likelihood.offset)
+            return Posterior(space, model, likelihood)
+
+        index = np.flatnonzero(chosen)
+        posterior = posterior_on(index, config.model.n_sub or None)
+        coarse = index[np.unique(np.linspace(0, n - 1, min(n, config.sampler.search_points)).round().astype(int))]
+        search_posterior = posterior_on(coarse, 1) if coarse.size < n or posterior.model.geometry.n_sub > 1 \
+            else posterior
+        return cls(pass_id, config, shape, posterior, observed.time_utc[chosen], search_posterior)
 
 
 def fit_problem(problem: FitProblem, chain_path, *, restart: bool = False, progress: bool = True) -> FitResult:
     """Sample a prepared problem (chain at `chain_path`, resumed when present) and summarise it."""
     config = problem.config
     run = run_sampler(problem.posterior, config.sampler, chain_path, restart=restart, progress=progress,
-                      description=f"fit {problem.pass_id}")
+                      description=f"fit {problem.pass_id}", search_posterior=problem.search_posterior)
     record = dict(config.to_dict(), shape=problem.shape)
     return FitResult.from_run(run, problem.posterior, pass_id=problem.pass_id, name=config.name,
                               time_utc=problem.time_utc, discard=config.discard, config=record)

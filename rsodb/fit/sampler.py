@@ -52,7 +52,13 @@ class SamplerSettings:
         Where walkers start: around the best point of a differential-evolution search, or
         drawn from the prior.
     search_maxiter, search_popsize : int
-        Generations and population multiplier of the differential-evolution search.
+        Generations and population multiplier of the differential-evolution search (the
+        population is ``search_popsize * ndim``; light-curve posteriors are multimodal and a
+        6-parameter search needs a population of ~90 to find the global mode reliably).
+    search_points : int
+        The search runs on at most this many samples, evenly spread, without exposure
+        sub-samples (a coarse posterior ~10x cheaper than the full one); the walkers then
+        start around its best point on the full posterior.
     ball_fraction : float
         Radius of the initial ball around the search's best point, as a fraction of each
         parameter's prior width.
@@ -67,15 +73,16 @@ class SamplerSettings:
     n_walkers: int = 20
     n_steps: int = 500
     init: str = "search"
-    search_maxiter: int = 30
-    search_popsize: int = 8
+    search_maxiter: int = 60
+    search_popsize: int = 15
+    search_points: int = 60
     ball_fraction: float = 1e-3
     processes: int = 1
     seed: int = 0
     checkpoint_every: int = 50
 
     def __post_init__(self):
-        for name in ("n_walkers", "n_steps", "search_maxiter", "search_popsize", "checkpoint_every"):
+        for name in ("n_walkers", "n_steps", "search_maxiter", "search_popsize", "search_points", "checkpoint_every"):
             value = getattr(self, name)
             if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or value < 1:
                 raise ValueError(f"sampler setting {name}={value!r} must be a positive integer")
@@ -155,23 +162,23 @@ class ChainRun:
 
 
 # -- log posterior in this process or in pool workers ----------------------------------------
-_WORKER_POSTERIOR = None
+_WORKER_POSTERIORS: tuple = (None, None)
 
 
-def _install_worker(posterior) -> None:
-    global _WORKER_POSTERIOR
+def _install_worker(posterior, search_posterior) -> None:
+    global _WORKER_POSTERIORS
     # Each worker is one of `processes` on a small machine: keep numerical libraries to one
     # thread so workers do not fight over cores.
     os.environ.setdefault("OMP_NUM_THREADS", "1")
-    _WORKER_POSTERIOR = posterior
+    _WORKER_POSTERIORS = (posterior, search_posterior)
 
 
 def _worker_log_prob(theta: np.ndarray) -> float:
-    return _WORKER_POSTERIOR(theta)
+    return _WORKER_POSTERIORS[0](theta)
 
 
 def _worker_cost(theta: np.ndarray) -> float:
-    value = _WORKER_POSTERIOR(theta)
+    value = _WORKER_POSTERIORS[1](theta)
     return -value if math.isfinite(value) else _IMPOSSIBLE
 
 
@@ -191,6 +198,7 @@ class _Evaluator:
     """Where log posteriors run: `log_prob`/`cost` functions and the `map` that applies them."""
 
     posterior: Any
+    search_posterior: Any
     pool: Any = None
     log_prob: Callable = field(init=False)
     cost: Callable = field(init=False)
@@ -198,7 +206,7 @@ class _Evaluator:
 
     def __post_init__(self):
         if self.pool is None:
-            self.log_prob, self.cost, self.map = self.posterior, _Cost(self.posterior), map
+            self.log_prob, self.cost, self.map = self.posterior, _Cost(self.search_posterior), map
         else:
             self.log_prob, self.cost, self.map = _worker_log_prob, _worker_cost, self.pool.map
 
@@ -225,7 +233,7 @@ class _ProcessPool:
         self.executor.shutdown(wait=True, cancel_futures=True)
 
 
-def _open_pool(posterior, processes: int) -> _ProcessPool | None:
+def _open_pool(posterior, search_posterior, processes: int) -> _ProcessPool | None:
     if processes <= 1:
         return None
     from concurrent.futures import ProcessPoolExecutor
@@ -233,7 +241,7 @@ def _open_pool(posterior, processes: int) -> _ProcessPool | None:
     # spawn, not fork: the parent may hold threads (tqdm, Dask, Open3D) that fork would copy
     # in a locked state.
     executor = ProcessPoolExecutor(processes, mp_context=multiprocessing.get_context("spawn"),
-                                   initializer=_install_worker, initargs=(posterior,))
+                                   initializer=_install_worker, initargs=(posterior, search_posterior))
     return _ProcessPool(executor, processes)
 
 
@@ -275,29 +283,36 @@ def init_from_prior(posterior, settings: SamplerSettings, rng: np.random.Generat
 
 def init_from_search(posterior, settings: SamplerSettings, rng: np.random.Generator,
                      evaluator: _Evaluator) -> tuple[np.ndarray, dict]:
-    """Walkers in a small ball around the best point of a differential-evolution search."""
-    from scipy.optimize import differential_evolution
+    """Walkers in a small ball around the best point of a differential-evolution search.
+
+    The search minimises ``evaluator.cost`` (minus the coarse search posterior) and polishes
+    its best point with L-BFGS-B; the ball is then checked on the full posterior.
+    """
+    from scipy.optimize import differential_evolution, minimize
 
     space = posterior.space
     bounds = space.bounds
     result = differential_evolution(
         evaluator.cost, bounds, maxiter=settings.search_maxiter, popsize=settings.search_popsize,
-        seed=int(rng.integers(2**31)), polish=False, init="latinhypercube", tol=1e-8,
+        seed=int(rng.integers(2**31)), polish=False, init="sobol", tol=1e-8,
         # "deferred" updating evaluates whole generations through `map`: the same search
         # whether it runs here or in the pool.
         workers=evaluator.map, updating="deferred",
     )
     if result.fun >= _IMPOSSIBLE:
         raise RuntimeError("the global search found no point where the posterior is non-zero; widen the priors")
+    # Polish here, in this process (scipy's own polish would call the pool-only cost function).
+    polished = minimize(_Cost(evaluator.search_posterior), result.x, method="L-BFGS-B", bounds=bounds)
+    best, best_cost = (polished.x, polished.fun) if polished.fun < result.fun else (result.x, result.fun)
     width = (bounds[:, 1] - bounds[:, 0]) * settings.ball_fraction
 
     def ball(k: int) -> np.ndarray:
-        theta = result.x + width * rng.standard_normal((k, space.ndim))
+        theta = best + width * rng.standard_normal((k, space.ndim))
         return _reflect_into(theta, bounds, space.periods)
 
     positions, evaluations = _finite_or_redraw(evaluator, ball, settings.n_walkers, "around the search's best point")
-    return positions, {"method": "search", "evaluations": int(result.nfev) + evaluations,
-                       "search_best_log_prob": float(-result.fun), "search_best": result.x.tolist(),
+    return positions, {"method": "search", "evaluations": int(result.nfev + polished.nfev) + evaluations,
+                       "search_best_log_prob": float(-best_cost), "search_best": best.tolist(),
                        "search_generations": int(result.nit)}
 
 
@@ -381,7 +396,7 @@ def read_chain(chain_path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarr
 
 # -- the entry point ------------------------------------------------------------------------
 def run_sampler(posterior, settings: SamplerSettings, chain_path: str | Path, *, restart: bool = False,
-                progress: bool = True, description: str = "sampling") -> ChainRun:
+                progress: bool = True, description: str = "sampling", search_posterior=None) -> ChainRun:
     """Run (or resume) emcee on `posterior`, storing the chain in `chain_path`.
 
     Parameters
@@ -399,6 +414,9 @@ def run_sampler(posterior, settings: SamplerSettings, chain_path: str | Path, *,
         Show a progress bar.
     description : str
         Label of the progress bar.
+    search_posterior : Posterior, optional
+        A cheaper posterior over the same parameters for the global search (default:
+        `posterior` itself).
 
     Returns
     -------
@@ -424,9 +442,12 @@ def run_sampler(posterior, settings: SamplerSettings, chain_path: str | Path, *,
     init_info: dict = {"method": "resumed" if stored else settings.init}
 
     backend = emcee.backends.HDFBackend(str(chain_path), name=CHAIN_GROUP)
-    pool = _open_pool(posterior, settings.n_processes) if remaining else None
+    search_posterior = posterior if search_posterior is None else search_posterior
+    if search_posterior.space.names != space.names:
+        raise ValueError("the search posterior must have the same free parameters as the posterior")
+    pool = _open_pool(posterior, search_posterior, settings.n_processes) if remaining else None
     try:
-        evaluator = _Evaluator(posterior, pool)
+        evaluator = _Evaluator(posterior, search_posterior, pool)
         sampler = None
         if stored == 0:
             rng = np.random.default_rng(settings.seed)
