@@ -119,7 +119,7 @@ def pdm(t_s, y, period_s, n_bins=10) -> np.ndarray:
     --------
     >>> t = np.arange(1000) * 0.1
     >>> y = np.sin(2 * np.pi * t / 7.0)
-    >>> bool(pdm(t, y, [7.0])[0] < 0.02 < pdm(t, y, [5.0])[0])
+    >>> bool(pdm(t, y, [7.0])[0] < 0.05 < 0.9 < pdm(t, y, [5.0])[0])
     True
     """
     y = np.asarray(y, dtype=float)
