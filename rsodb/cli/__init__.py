@@ -20,6 +20,9 @@ COMMAND_MODULES = [
     "export",
     "periods",
     "report",
+    "fit",
+    "campaign",
+    "pipeline",
 ]
 
 

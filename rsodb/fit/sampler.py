@@ -34,6 +34,7 @@ import numpy as np
 __all__ = ["SamplerSettings", "ChainRun", "run_sampler", "INITIALISERS", "read_chain"]
 
 CHAIN_GROUP = "mcmc"
+_SINGLE_THREAD_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 # Stand-in for -ln p where the posterior is zero, for the minimiser (it needs finite values).
 _IMPOSSIBLE = 1e30
 
@@ -167,9 +168,6 @@ _WORKER_POSTERIORS: tuple = (None, None)
 
 def _install_worker(posterior, search_posterior) -> None:
     global _WORKER_POSTERIORS
-    # Each worker is one of `processes` on a small machine: keep numerical libraries to one
-    # thread so workers do not fight over cores.
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
     _WORKER_POSTERIORS = (posterior, search_posterior)
 
 
@@ -222,6 +220,7 @@ class _ProcessPool:
 
     executor: Any
     processes: int
+    saved_environment: dict
 
     def map(self, fn: Callable, iterable) -> list:
         items = list(iterable)
@@ -231,6 +230,11 @@ class _ProcessPool:
 
     def close(self) -> None:
         self.executor.shutdown(wait=True, cancel_futures=True)
+        for key, value in self.saved_environment.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
 
 
 def _open_pool(posterior, search_posterior, processes: int) -> _ProcessPool | None:
@@ -238,11 +242,16 @@ def _open_pool(posterior, search_posterior, processes: int) -> _ProcessPool | No
         return None
     from concurrent.futures import ProcessPoolExecutor
 
+    # Each worker is one of `processes` on a small machine: one BLAS/OpenMP thread each, or
+    # they fight over the cores. The executor spawns its workers lazily, so the variables stay
+    # set until the pool is closed.
+    saved = {key: os.environ.get(key) for key in _SINGLE_THREAD_ENV}
+    os.environ.update(_SINGLE_THREAD_ENV)
     # spawn, not fork: the parent may hold threads (tqdm, Dask, Open3D) that fork would copy
     # in a locked state.
     executor = ProcessPoolExecutor(processes, mp_context=multiprocessing.get_context("spawn"),
                                    initializer=_install_worker, initargs=(posterior, search_posterior))
-    return _ProcessPool(executor, processes)
+    return _ProcessPool(executor, processes, saved)
 
 
 # -- initialisation -----------------------------------------------------------------------

@@ -14,6 +14,7 @@ __all__ = ["REPORT_KINDS", "report_module"]
 # Kind -> module (imported only when that kind is used).
 REPORT_KINDS = {
     "periods": "rsodb.report.periods",
+    "campaign": "rsodb.report.campaign",
 }
 
 
