@@ -33,7 +33,7 @@ from numpy.polynomial import legendre
 
 __all__ = [
     "SeriesData", "TimeAxis", "HarmonicFit", "harmonic_basis", "normal_equations", "nested_rss", "bic",
-    "fit_harmonics", "refine_frequency", "max_harmonics", "powers",
+    "fit_harmonics", "scan_frequency", "polish_frequency", "refine_frequency", "max_harmonics", "powers",
 ]
 
 
@@ -175,14 +175,49 @@ def _design(data: SeriesData, frequency_hz: float, n_harmonics: int) -> np.ndarr
 
 
 @lru_cache(maxsize=256)
-def _index_tables(n_harmonics: int):
-    """|j - k|, sign(j - k) and j + k for harmonics j, k = 1..K (read-only, cached)."""
-    j = np.arange(1, n_harmonics + 1)
+def _block_tables(n_harmonics: int):
+    """Gather indices and coefficients that build the (2K, 2K) harmonic block from the sums.
+
+    With ``V = [Re Z_0 .. Re Z_2K, Im Z_0 .. Im Z_2K]`` (``Z_m = sum w z^m``), the block is
+    ``c1 * V[i1] + c2 * V[i2]`` where, for harmonics j, k:
+
+    * cos j cos k = (Re Z_|j-k| + Re Z_j+k) / 2,  sin j sin k = (Re Z_|j-k| - Re Z_j+k) / 2,
+    * cos j sin k = (Im Z_j+k - sign(j-k) Im Z_|j-k|) / 2, and sin j cos k its transpose.
+    """
+    k = n_harmonics
+    length = 2 * k + 1
+    j = np.arange(1, k + 1)
     diff = j[:, None] - j[None, :]
-    tables = np.abs(diff), np.sign(diff), j[:, None] + j[None, :]
+    absolute, sign, total = np.abs(diff), np.sign(diff), j[:, None] + j[None, :]
+    i1 = np.empty((k, 2, k, 2), dtype=np.intp)
+    i2 = np.empty_like(i1)
+    c1 = np.empty((k, 2, k, 2))
+    c2 = np.empty_like(c1)
+    i1[:, 0, :, 0], c1[:, 0, :, 0], i2[:, 0, :, 0], c2[:, 0, :, 0] = absolute, 0.5, total, 0.5
+    i1[:, 1, :, 1], c1[:, 1, :, 1], i2[:, 1, :, 1], c2[:, 1, :, 1] = absolute, 0.5, total, -0.5
+    i1[:, 0, :, 1], c1[:, 0, :, 1] = length + total, 0.5
+    i2[:, 0, :, 1], c2[:, 0, :, 1] = length + absolute, -0.5 * sign
+    i1[:, 1, :, 0], c1[:, 1, :, 0] = length + total, 0.5
+    i2[:, 1, :, 0], c2[:, 1, :, 0] = length + absolute, 0.5 * sign       # sign(k - j) = -sign(j - k)
+    tables = tuple(a.reshape(2 * k, 2 * k) for a in (i1, c1, i2, c2))
     for table in tables:
         table.setflags(write=False)
     return tables
+
+
+def _unit_phasors(frequency_hz: np.ndarray, tc: np.ndarray) -> np.ndarray:
+    """(m, n) ``exp(2 pi i f t)``; an evenly spaced batch costs two exponentials, not m."""
+    m = frequency_hz.shape[0]
+    if m > 2:
+        step = np.diff(frequency_hz)
+        if np.allclose(step, step[0], rtol=1e-9, atol=0.0):
+            out = np.empty((m, tc.shape[0]), dtype=complex)
+            out[0] = np.exp(2j * np.pi * frequency_hz[0] * tc)
+            ratio = np.exp(2j * np.pi * step[0] * tc)
+            for i in range(1, m):
+                np.multiply(out[i - 1], ratio, out=out[i])
+            return out
+    return np.exp(2j * np.pi * frequency_hz[:, None] * tc)
 
 
 def normal_equations(data: SeriesData, frequency_hz, n_harmonics: int):
@@ -208,27 +243,21 @@ def normal_equations(data: SeriesData, frequency_hz, n_harmonics: int):
     """
     f = np.asarray(frequency_hz, dtype=float)
     big_k, n_trend = n_harmonics, data.n_trend
-    z = np.exp(2j * np.pi * np.atleast_1d(f)[:, None] * data.tc)                  # (m, n)
+    z = _unit_phasors(np.atleast_1d(f), data.tc)                                   # (m, n)
     planes = powers(z, 2 * big_k)                                                 # (m, 2K+1, n)
     zsum = planes @ data.weight_c                                                 # (m, 2K+1)
     sums = planes[:, 1:big_k + 1] @ data.rows                                     # (m, K, D+1)
     ysum = sums[..., 0]                                                           # (m, K)
     cross = np.swapaxes(sums[..., 1:], -1, -2)                                    # (m, D, K)
 
-    absolute, sign, total = _index_tables(big_k)
-    re_d, im_d = zsum[:, absolute].real, sign * zsum[:, absolute].imag
-    re_s, im_s = zsum[:, total].real, zsum[:, total].imag
+    i1, c1, i2, c2 = _block_tables(big_k)
+    values = np.concatenate([zsum.real, zsum.imag], axis=-1)                     # (m, 2(2K+1))
+    block = c1 * values[:, i1] + c2 * values[:, i2]                               # (m, 2K, 2K)
     m = zsum.shape[0]
-    block = np.empty((m, big_k, 2, big_k, 2))
-    block[:, :, 0, :, 0] = 0.5 * (re_d + re_s)       # sum w cos(j) cos(k)
-    block[:, :, 1, :, 1] = 0.5 * (re_d - re_s)       # sum w sin(j) sin(k)
-    cs = 0.5 * (im_s - im_d)                         # sum w cos(j) sin(k)
-    block[:, :, 0, :, 1] = cs
-    block[:, :, 1, :, 0] = np.swapaxes(cs, -1, -2)
     p = n_trend + 2 * big_k
     gram = np.empty((m, p, p))
     gram[:, :n_trend, :n_trend] = data.trend_gram
-    gram[:, n_trend:, n_trend:] = block.reshape(m, 2 * big_k, 2 * big_k)
+    gram[:, n_trend:, n_trend:] = block
     trend_harmonic = np.stack([cross.real, cross.imag], axis=-1).reshape(m, n_trend, 2 * big_k)
     gram[:, :n_trend, n_trend:] = trend_harmonic
     gram[:, n_trend:, :n_trend] = np.swapaxes(trend_harmonic, -1, -2)
@@ -466,20 +495,13 @@ def fit_harmonics(data: SeriesData, frequency_hz: float, n_harmonics: int) -> Ha
     )
 
 
-def refine_frequency(data: SeriesData, frequency_hz: float, n_harmonics: int, half_width_hz: float,
-                     scan_harmonics: int | None = None) -> float:
-    """Frequency minimising the RSS of a K-harmonic model within `half_width_hz` of a start.
+def scan_frequency(data: SeriesData, frequency_hz: float, n_harmonics: int, half_width_hz: float):
+    """Locate the RSS minimum of a K-harmonic model near a start on a short grid.
 
-    1. Scan: a grid with steps of ``0.3 / (K_scan T)`` (a third of the width of the RSS minimum
-       of the top scanned harmonic) covers the interval in one batched evaluation of the model
-       with `scan_harmonics` harmonics, extended once if the minimum lies on its edge.
-    2. Polish: parabolas through the full model's RSS at ``f - h, f, f + h`` with
-       ``h = 0.3 / (K T)``, moving by at most ``h`` until the vertex lies inside, then with
-       ``h / 4`` and ``h / 32``.
-
-    Scanning with fewer harmonics keeps the grid short for glint-like curves whose many
-    harmonics make the full model's minimum narrow. Gauss-Newton steps are not used: on real
-    light curves the model mismatch makes them crawl.
+    A grid with steps of ``0.3 / (K T)`` (a third of the width of the RSS minimum of the top
+    harmonic) covers ``frequency_hz +- half_width_hz`` in one batched evaluation, extended once
+    if the minimum lies on its edge; a parabola through the lowest point and its neighbours
+    places the minimum.
 
     Parameters
     ----------
@@ -487,41 +509,65 @@ def refine_frequency(data: SeriesData, frequency_hz: float, n_harmonics: int, ha
     frequency_hz : float
         Start.
     n_harmonics : int
+        Harmonics of the scanned model.
     half_width_hz : float
         How far from the start the minimum may be.
-    scan_harmonics : int, optional
-        Harmonics used in the scan (default: all).
+
+    Returns
+    -------
+    frequency_hz : float
+        The parabola's vertex.
+    rss : (K + 1,) float
+        Nested RSS (0..K harmonics) at the lowest grid point.
+    """
+    step = 0.3 / (n_harmonics * data.axis.duration_s)
+    half_steps = max(1, int(math.ceil(half_width_hz / step)))
+    offsets = step * np.arange(-half_steps, half_steps + 1)
+    grid = frequency_hz + offsets
+    rss = nested_rss(data, grid, n_harmonics)
+    i = int(np.argmin(rss[:, -1]))
+    if i in (0, len(grid) - 1):                    # minimum on the edge: look one interval further
+        grid = grid[i] + offsets
+        rss = nested_rss(data, grid, n_harmonics)
+        i = int(np.clip(np.argmin(rss[:, -1]), 1, len(grid) - 2))
+    return _vertex(grid[i], step, *rss[i - 1:i + 2, -1])[0], rss[i]
+
+
+def polish_frequency(data: SeriesData, frequency_hz: float, n_harmonics: int) -> float:
+    """Refine a frequency already near the RSS minimum of the K-harmonic model.
+
+    Parabolas through the RSS at ``f - h, f, f + h`` with ``h = 0.3 / (K T)``, moving by at
+    most ``h`` until the vertex lies inside, then one more with ``h / 4``. The RSS is not
+    exactly quadratic over ``+-h``; the remaining bias is ~1e-4 of the resolution ``1 / T``,
+    far below the statistical error of any real light curve. (Gauss-Newton steps are not used:
+    on real light curves the model mismatch makes them crawl.)
+    """
+    h = 0.3 / (n_harmonics * data.axis.duration_s)
+    f = float(frequency_hz)
+    for _ in range(4):
+        rss = nested_rss(data, np.array([f - h, f, f + h]), n_harmonics)[:, -1]
+        f, inside = _vertex(f, h, *rss)
+        if inside:
+            break
+    rss = nested_rss(data, np.array([f - h / 4, f, f + h / 4]), n_harmonics)[:, -1]
+    return _vertex(f, h / 4, *rss)[0]
+
+
+def refine_frequency(data: SeriesData, frequency_hz: float, n_harmonics: int, half_width_hz: float,
+                     scan_harmonics: int | None = None) -> float:
+    """`scan_frequency` (with `scan_harmonics`, default all) then `polish_frequency` with all K.
+
+    Scanning with fewer harmonics keeps the grid short for glint-like curves whose many
+    harmonics make the full model's minimum narrow.
 
     Returns
     -------
     float
         The refined frequency.
     """
-    duration = data.axis.duration_s
     k_scan = n_harmonics if scan_harmonics is None else max(1, min(scan_harmonics, n_harmonics))
-    step = 0.3 / (k_scan * duration)
-    half_steps = max(1, int(math.ceil(half_width_hz / step)))
-    offsets = step * np.arange(-half_steps, half_steps + 1)
-    grid = frequency_hz + offsets
-    rss = nested_rss(data, grid, k_scan)[:, -1]
-    i = int(np.argmin(rss))
-    if i in (0, len(grid) - 1):                    # minimum on the edge: look one interval further
-        grid = grid[i] + offsets
-        rss = nested_rss(data, grid, k_scan)[:, -1]
-        i = int(np.clip(np.argmin(rss), 1, len(grid) - 2))
-    f = _vertex(grid[i], step, *rss[i - 1:i + 2])[0]
-    h = 0.3 / (n_harmonics * duration)
-    for _ in range(4):
-        rss = nested_rss(data, np.array([f - h, f, f + h]), n_harmonics)[:, -1]
-        f, inside = _vertex(f, h, *rss)
-        if inside:
-            break
-    for shrink in (4, 32):
-        # Finer parabolas: the RSS is not exactly quadratic over +-h, so each one removes most of
-        # the previous one's bias (to ~1e-5 of the resolution 1/T for a noiseless curve).
-        rss = nested_rss(data, np.array([f - h / shrink, f, f + h / shrink]), n_harmonics)[:, -1]
-        f = _vertex(f, h / shrink, *rss)[0]
-    return f
+    f, _ = scan_frequency(data, frequency_hz, k_scan, half_width_hz)
+    return polish_frequency(data, f, n_harmonics)
 
 
 def _vertex(center: float, h: float, left: float, mid: float, right: float) -> tuple[float, bool]:

@@ -242,7 +242,7 @@ class LightCurve:
         trend = None if self.trend_mag is None else self.trend_mag[mask]
         return replace(self, t_s=self.t_s[mask], mag=self.mag[mask], mag_err=self.mag_err[mask], trend_mag=trend)
 
-    def periodogram(self, method: str = "lombscargle", *, nterms: int = 1, oversampling: float = 10.0,
+    def periodogram(self, method: str = "lombscargle", *, nterms: int = 1, oversampling: float | None = None,
                     minimum_period_s: float | None = None, maximum_period_s: float | None = None,
                     error_floor_mag: float = DEFAULT_ERROR_FLOOR_MAG):
         """Power against frequency; see `rsodb.periodogram.periodogram` for the arguments."""

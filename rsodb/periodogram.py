@@ -6,8 +6,12 @@ curve's cadence and duration (`frequency_grid`):
 * lowest frequency ``1 / maximum_period_s`` (default: one cycle in the pass, ``1 / T``);
 * highest ``1 / minimum_period_s`` (default: the Nyquist frequency of the median cadence,
   ``1 / (2 dt)``);
-* spacing ``1 / (oversampling T)`` with ``oversampling = 10`` by default, i.e. ten samples
-  across each peak of width ``~1 / T`` (VanderPlas 2018, ApJS 236, 16, recommends 5-10).
+* spacing ``1 / (oversampling T)`` with ``oversampling = 5`` by default, i.e. five samples
+  across each peak of width ``~1 / T`` (VanderPlas 2018, ApJS 236, 16, recommends 5-10;
+  5 is astropy's ``samples_per_peak`` default) for Lomb-Scargle, whose peaks are ``~1 / T``
+  wide; 20 for PDM and string length, whose minima narrow with every harmonic the curve has
+  (a glint's minimum is many times narrower). The period search refines every candidate off
+  the grid, so a denser Lomb-Scargle grid buys it nothing.
 
 Methods (`PERIODOGRAM_METHODS`):
 
@@ -32,9 +36,12 @@ import numpy as np
 from rsodb.dispersion import pdm, string_length
 from rsodb.lightcurve import DEFAULT_ERROR_FLOOR_MAG, LightCurve, _axes
 
-__all__ = ["Periodogram", "periodogram", "frequency_grid", "PERIODOGRAM_METHODS", "DEFAULT_OVERSAMPLING"]
+__all__ = ["Periodogram", "periodogram", "frequency_grid", "PERIODOGRAM_METHODS", "DEFAULT_OVERSAMPLING",
+           "METHOD_OVERSAMPLING"]
 
-DEFAULT_OVERSAMPLING = 10.0
+DEFAULT_OVERSAMPLING = 5.0
+# Grid points per 1/T by method when none is given (see the module notes).
+METHOD_OVERSAMPLING = {"lombscargle": 5.0, "pdm": 20.0, "string_length": 20.0}
 
 
 def frequency_grid(t_s, oversampling: float = DEFAULT_OVERSAMPLING, minimum_period_s: float | None = None,
@@ -205,7 +212,7 @@ class Periodogram:
 
 
 def periodogram(lc: LightCurve, method: str = "lombscargle", *, nterms: int = 1,
-                oversampling: float = DEFAULT_OVERSAMPLING, minimum_period_s: float | None = None,
+                oversampling: float | None = None, minimum_period_s: float | None = None,
                 maximum_period_s: float | None = None,
                 error_floor_mag: float = DEFAULT_ERROR_FLOOR_MAG) -> Periodogram:
     """Power of a light curve on the grid of `frequency_grid`.
@@ -219,7 +226,8 @@ def periodogram(lc: LightCurve, method: str = "lombscargle", *, nterms: int = 1,
     nterms : int
         Fourier terms for Lomb-Scargle (1 to 10); the grid then stops where the top term reaches
         the Nyquist frequency.
-    oversampling : float
+    oversampling : float, optional
+        Grid points per 1/T (default by method: 5 for Lomb-Scargle, 20 for the dispersions).
     minimum_period_s, maximum_period_s : float, optional
     error_floor_mag : float
 
@@ -231,6 +239,8 @@ def periodogram(lc: LightCurve, method: str = "lombscargle", *, nterms: int = 1,
         raise ValueError(f"method={method!r} is not one of {', '.join(PERIODOGRAM_METHODS)}")
     if not isinstance(nterms, (int, np.integer)) or not 1 <= nterms <= 10:
         raise ValueError(f"nterms={nterms!r} must be a whole number from 1 to 10")
+    if oversampling is None:
+        oversampling = METHOD_OVERSAMPLING[method]
     if lc.trend_mag is None:
         lc = lc.detrend()
     if minimum_period_s is None and nterms > 1:

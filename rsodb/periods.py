@@ -9,7 +9,7 @@ of 2024-07-30 the one-term Lomb-Scargle peak is 2.37 s while the light curve rep
    pass trend modelled as a degree-3 Legendre polynomial in time (see `rsodb.lightcurve`),
    weights ``1 / (err^2 + 0.01^2)``.
 2. **Periodogram.** astropy's one-term Lomb-Scargle of the detrended curve on the grid of
-   `rsodb.periodogram.frequency_grid` (10 points per 1/T, up to the Nyquist frequency of the
+   `rsodb.periodogram.frequency_grid` (5 points per 1/T, up to the Nyquist frequency of the
    cadence); its false-alarm probability (Baluev 2008) is astropy's.
 3. **Candidates.** P/2, P, 2P, 3P and 4P of the peak period P, and of the peak of the harmonic
    sum ``S(f) = sum_{h<=4} power(h f)`` (which lands on the fundamental of a glint curve
@@ -52,8 +52,8 @@ import math
 import numpy as np
 
 from rsodb import dispersion
-from rsodb.harmonic import (HarmonicFit, SeriesData, TimeAxis, bic, fit_harmonics, max_harmonics, nested_rss, powers,
-                            refine_frequency)
+from rsodb.harmonic import (HarmonicFit, SeriesData, TimeAxis, bic, fit_harmonics, max_harmonics, nested_rss,
+                            polish_frequency, powers, scan_frequency)
 from rsodb.lightcurve import LightCurve
 from rsodb.synodic import SynodicCorrection
 
@@ -102,6 +102,9 @@ class PeriodSettings:
         around it) that counts as a repeating signal.
     bic_margin : float
         BIC difference to every other candidate needed for "confident".
+    refine_margin : float
+        Candidates whose scan (low harmonics only) is more than this behind the scan's leader
+        in BIC are not polished further; they are reported with their scan scores.
     pdm_bins : int
         PDM bins per Lomb-Scargle peak period (bins have this fixed width in time for all
         candidates, so multiples of the period get proportionally more).
@@ -109,7 +112,7 @@ class PeriodSettings:
         Search range (defaults: twice the cadence, the pass duration).
     """
 
-    oversampling: float = 10.0
+    oversampling: float = 5.0
     trend_degree: int = 3
     error_floor_mag: float = 0.01
     multiples: tuple[float, ...] = (0.5, 1.0, 2.0, 3.0, 4.0)
@@ -120,6 +123,7 @@ class PeriodSettings:
     fap_threshold: float = 1e-3
     snr_threshold: float = 4.0
     bic_margin: float = 10.0
+    refine_margin: float = 100.0
     pdm_bins: int = 8
     minimum_period_s: float | None = None
     maximum_period_s: float | None = None
@@ -127,7 +131,7 @@ class PeriodSettings:
     def __post_init__(self):
         object.__setattr__(self, "multiples", tuple(float(m) for m in self.multiples))
         positive = ("oversampling", "error_floor_mag", "harmonic_ceiling", "min_cycles", "fap_threshold",
-                    "snr_threshold", "bic_margin")
+                    "snr_threshold", "bic_margin", "refine_margin")
         for name in positive:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
@@ -495,7 +499,7 @@ class _Problem:
         return abs(f_a - f_b) < 0.25 / self.duration_s
 
     def known(self, frequency_hz: float) -> bool:
-        return any(self.same(frequency_hz, s.fit.frequency_hz) or self.same(frequency_hz, s.start_hz)
+        return any(self.same(frequency_hz, s.frequency_hz) or self.same(frequency_hz, s.start_hz)
                    for s in self.scored)
 
 
@@ -505,46 +509,88 @@ class _Scored:
     start_hz: float
     fit: HarmonicFit
     k_max: int
-    bic: float          # the criterion used for ranking (effective-sample BIC once known)
+    bic: float                # the criterion used for ranking (effective-sample BIC once known)
+    rss_curve: np.ndarray     # nested RSS for 0..k harmonics near the candidate's frequency
+    refined: bool = False
+    scan_hz: float = math.nan  # where the scan put it
+
+    @property
+    def frequency_hz(self) -> float:
+        return self.scan_hz if self.fit is None else self.fit.frequency_hz
 
 
-def _score(problem: _Problem, frequency_hz: float, label: str) -> _Scored | None:
-    """Refine one candidate's frequency and choose its harmonic count by the BIC."""
-    s = problem.settings
-    data = problem.data
-    if frequency_hz > problem.nyquist_hz or frequency_hz * problem.duration_s < 1.0:
-        return None
-    if problem.ceiling_hz < frequency_hz:
+def _finish(problem: "_Problem", scored: _Scored) -> None:
+    """Fit a candidate left at its scan (for its period error and the ranking table)."""
+    if scored.fit is None:
+        scored.fit = fit_harmonics(problem.data, scored.scan_hz, _choose(problem, scored.rss_curve))
+
+
+def _admissible(problem: _Problem, frequency_hz: float) -> bool:
+    """A candidate needs one full cycle in the pass and its fundamental under the harmonic ceiling."""
+    return (frequency_hz * problem.duration_s >= 1.0 and frequency_hz <= problem.nyquist_hz
+            and frequency_hz <= problem.ceiling_hz)
+
+
+def _choose(problem: _Problem, rss_curve: np.ndarray) -> int:
+    """Harmonic count with the lowest criterion, from nested RSS for 0..k harmonics."""
+    return int(np.argmin(problem.criterion(rss_curve[1:], np.arange(1, len(rss_curve))))) + 1
+
+
+def _scan(problem: _Problem, frequency_hz: float, label: str) -> _Scored | None:
+    """First look at a candidate: its frequency located with the low harmonics only.
+
+    The scanned model keeps the harmonics up to ~3x the Lomb-Scargle peak frequency - the same
+    frequency content for every candidate, so the models of P and 2P stay nested and the
+    scan's BIC already ranks them fairly.
+    """
+    s, data = problem.settings, problem.data
+    if not _admissible(problem, frequency_hz):
         return None
     k_max = max_harmonics(frequency_hz, problem.ceiling_hz, data.n_points, s.trend_degree, s.max_harmonics)
-    harmonics = np.arange(1, k_max + 1)
-
-    def best_count(f: float) -> int:
-        return int(np.argmin(problem.criterion(nested_rss(data, f, k_max)[1:], harmonics))) + 1
-
+    k_scan = min(int(math.ceil(3 * problem.peak_hz / frequency_hz)), k_max)
     # The start inherits the error of the Lomb-Scargle peak (up to ~0.15 / T), divided by the
     # multiple: a candidate at f_peak / 4 is known four times better in frequency.
     half_width = 0.3 / problem.duration_s * min(1.0, frequency_hz / problem.peak_hz)
-    # Scan with the harmonics up to ~3x the peak frequency; the polish uses them all.
-    scan = int(math.ceil(3 * problem.peak_hz / frequency_hz))
-    k = best_count(frequency_hz)
-    f = refine_frequency(data, frequency_hz, k, half_width, scan_harmonics=scan)
-    k_new = best_count(f)
+    f, curve = scan_frequency(data, frequency_hz, k_scan, half_width)
+    k = _choose(problem, curve)
+    # The fit itself waits until it is needed (`_finish`): most scanned candidates get refined.
+    return _Scored(label, frequency_hz, None, k_max, float(problem.criterion(curve[k], k)), curve, scan_hz=f)
+
+
+def _refine(problem: _Problem, scored: _Scored) -> None:
+    """Polish a scanned candidate with all its harmonics; the BIC picks their number."""
+    data = problem.data
+    curve = nested_rss(data, scored.frequency_hz, scored.k_max)
+    k = _choose(problem, curve)
+    f = polish_frequency(data, scored.frequency_hz, k)
+    curve = nested_rss(data, f, scored.k_max)
+    k_new = _choose(problem, curve)
     if k_new != k:
         # A refined frequency keeps high harmonics coherent, so the BIC may then want more of them.
         k = k_new
-        f = refine_frequency(data, f, k, 0.1 / (k * problem.duration_s), scan_harmonics=scan)
-    fit = fit_harmonics(data, f, k)
-    return _Scored(label, frequency_hz, fit, k_max, float(problem.criterion(fit.rss, k)))
+        f = polish_frequency(data, f, k)
+    scored.fit = fit_harmonics(data, f, k)
+    scored.bic = float(problem.criterion(scored.fit.rss, k))
+    scored.rss_curve = curve
+    scored.refined = True
+
+
+def _score(problem: _Problem, frequency_hz: float, label: str) -> _Scored | None:
+    """Scan and refine one candidate."""
+    scored = _scan(problem, frequency_hz, label)
+    if scored is not None:
+        _refine(problem, scored)
+    return scored
 
 
 def _rescore(problem: _Problem, scored: _Scored) -> None:
     """Choose the harmonic count again and recompute the criterion (after `n_effective` changed)."""
-    f = scored.fit.frequency_hz
-    values = problem.criterion(nested_rss(problem.data, f, scored.k_max)[1:], np.arange(1, scored.k_max + 1))
-    k = int(np.argmin(values)) + 1
+    k = _choose(problem, scored.rss_curve)
+    if scored.fit is None:
+        scored.bic = float(problem.criterion(scored.rss_curve[k], k))
+        return
     if k != scored.fit.n_harmonics:
-        scored.fit = fit_harmonics(problem.data, f, k)
+        scored.fit = fit_harmonics(problem.data, scored.fit.frequency_hz, k)
     scored.bic = float(problem.criterion(scored.fit.rss, k))
 
 
@@ -556,7 +602,7 @@ def _meet_neighbours(problem: _Problem) -> None:
             return
         added = False
         for factor, tag in ((0.5, "x2"), (2.0, "x0.5")):
-            f = leader.fit.frequency_hz * factor
+            f = leader.frequency_hz * factor
             if not problem.known(f):
                 scored = _score(problem, f, f"{leader.label}{tag}")
                 if scored is not None:
@@ -684,14 +730,21 @@ def find_period(lightcurve: LightCurve, geometry=None, settings: PeriodSettings 
         for multiple in settings.multiples if symbol == "P" else (1.0,):
             f = f_base / multiple
             if not problem.known(f):
-                scored = _score(problem, f, _multiple_label(multiple, symbol))
+                scored = _scan(problem, f, _multiple_label(multiple, symbol))
                 if scored is not None:
                     problem.scored.append(scored)
+    # Only candidates near the scan's leader can win once refined: polish those.
+    leader = problem.leader()
+    for scored in problem.scored:
+        if leader is not None and scored.bic - leader.bic < settings.refine_margin:
+            _refine(problem, scored)
     _meet_neighbours(problem)
     # Correlated residuals (red noise, or a shape that drifts during the pass) make every extra
     # harmonic look significant, and multiples of the period fit them best. Re-rank with the
     # AR(1) effective sample size of the leader's residuals (Bayley & Hammersley 1946).
     leader = problem.leader()
+    if leader is not None:
+        _finish(problem, leader)
     rho = 0.0 if leader is None else min(max(leader.fit.residual_lag1, 0.0), 0.98)
     if rho > 0.05:
         problem.n_effective = problem.data.n_points * (1 - rho) / (1 + rho)
@@ -703,6 +756,8 @@ def find_period(lightcurve: LightCurve, geometry=None, settings: PeriodSettings 
                           f"no candidate period fits in the {duration:.0f} s pass at a {lc.cadence_s:g} s cadence",
                           false_alarm_probability=fap, peak_period_s=1.0 / f_peak)
 
+    for scored in problem.scored:
+        _finish(problem, scored)
     candidates = _rank(problem)
     fit = problem.leader().fit
     best = candidates[0]
