@@ -45,6 +45,7 @@ from raycast.scene import Scene
 __all__ = ["SceneCache", "cube_grid_directions", "cube_grid_weights"]
 
 _MAX_RAYS_PER_BATCH = 2_000_000
+_MAX_LEVEL = 16
 
 
 def cube_grid_directions(grid_size):
@@ -147,10 +148,10 @@ class SceneCache:
         scene : Scene
         accuracy_mag : float, used for the defaults below.
         element_size_m : float, optional, largest element on shadowable sides
-            (default: the mesh radius / 40).
+            (default: the mesh radius / 30).
         normal_step_deg : float, optional, largest shading-normal change within an element of
             smooth-shaded triangles (default per material: half its specular lobe width alpha,
-            between 0.5 and 3 deg; 5 deg for diffuse materials).
+            between 0.5 and 3 deg; 15 deg for diffuse materials).
         grid_size : int, cube-map resolution N (directions about 90/N deg apart).
         articulation_grid : dict, optional, ``{parameter: values}`` for one articulation parameter.
         sun_samples : int, optional, solar-disk samples in the BRDF of every material (default
@@ -164,7 +165,7 @@ class SceneCache:
         start = time.perf_counter()
         mesh = scene.posed()
         if element_size_m is None:
-            element_size_m = mesh.radius_m / 40.0
+            element_size_m = mesh.radius_m / 30.0
         if not (math.isfinite(element_size_m) and element_size_m > 0.0):
             raise ValueError(f"element_size_m={element_size_m!r} must be a positive number of metres")
         sun_samples = tuple(sun_samples_for(b, accuracy_mag) if sun_samples is None else int(sun_samples)
@@ -303,7 +304,9 @@ def _normal_step_rad(brdf, normal_step_deg):
     if normal_step_deg is not None:
         return math.radians(normal_step_deg)
     if brdf is None or not brdf.lobe_width_rad:
-        return math.radians(5.0)
+        # Diffuse shading is linear in the normal except where the cosine clips at the
+        # terminator, so an element's mean normal is exact away from it.
+        return math.radians(15.0)
     return math.radians(float(np.clip(math.degrees(brdf.lobe_width_rad) / 2.0, 0.5, 3.0)))
 
 
@@ -318,6 +321,12 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, progress):
     spread = np.stack([np.einsum("ij,ij->i", mesh.corner_normals[:, a], mesh.corner_normals[:, b])
                        for a, b in ((0, 1), (1, 2), (2, 0))], axis=1).min(axis=1)
     level_normal = np.ceil(np.arccos(np.clip(spread, -1.0, 1.0)) / normal_step_rad[mesh.material_index] - 1e-9)
+    # A triangle whose corner normals differ by tens of degrees (a smooth-shaded rim) would
+    # otherwise be cut into thousands of elements; 16 x 16 bounds the cost.
+    level_normal = np.minimum(level_normal, _MAX_LEVEL)
+    # Nor are elements made smaller than half of element_size_m: a small triangle's glint
+    # carries little light.
+    level_normal = np.minimum(level_normal, np.ceil(np.sqrt(2.0 * mesh.areas_m2) / (element_size_m / 2.0)))
     # Elements of about element_size_m**2 / 2 (a right triangle with legs element_size_m).
     level_size = np.ceil(np.sqrt(2.0 * mesh.areas_m2) / element_size_m)
     elements = []
@@ -397,23 +406,25 @@ def _visibility(mesh, points, normals, directions, progress):
     """
     raycaster = _open3d_scene(mesh)
     offset = 1e-4 * max(mesh.radius_m, 1.0)
-    origins = points + offset * normals
-    cosines = directions @ normals.T  # (d, e)
-    pairs_d, pairs_e = np.nonzero(cosines > 0.0)
-    visibility = np.ones(cosines.shape, dtype=np.uint8)
-    total = len(pairs_d)
+    origins = (points + offset * normals).astype(np.float32)
+    visibility = np.ones((len(directions), len(points)), dtype=np.uint8)
+    directions32 = directions.astype(np.float32)
+    chunk = max(1, _MAX_RAYS_PER_BATCH // len(directions))
     bar = None
     if progress:
         from tqdm.auto import tqdm
-        bar = tqdm(total=total, unit="ray", unit_scale=True, desc="visibility")
-    for begin in range(0, total, _MAX_RAYS_PER_BATCH):
-        d_idx = pairs_d[begin:begin + _MAX_RAYS_PER_BATCH]
-        e_idx = pairs_e[begin:begin + _MAX_RAYS_PER_BATCH]
-        rays = np.concatenate([origins[e_idx], directions[d_idx]], axis=1).astype(np.float32)
+        bar = tqdm(total=len(points), unit="element", desc="visibility")
+    total = 0
+    for begin in range(0, len(points), chunk):
+        elements = np.arange(begin, min(begin + chunk, len(points)))
+        d_idx, e_local = np.nonzero(directions @ normals[elements].T > 0.0)
+        e_idx = elements[e_local]
+        rays = np.concatenate([origins[e_idx], directions32[d_idx]], axis=1)
         blocked = raycaster.test_occlusions(rays).numpy()
         visibility[d_idx[blocked], e_idx[blocked]] = 0
+        total += len(d_idx)
         if bar is not None:
-            bar.update(len(d_idx))
+            bar.update(len(elements))
     if bar is not None:
         bar.close()
     return visibility, total
