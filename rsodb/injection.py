@@ -102,7 +102,7 @@ def synthetic_lightcurve(injection: Injection) -> LightCurve:
     """The light curve of an `Injection` (its `seed` makes it reproducible).
 
     The pass lasts ``n_points * cadence_s``; samples are regular, then gaps remove
-    `gap_fraction` of the pass in two blocks at random places. The trend is a parabola of
+    `gap_fraction` of the pass in two blocks at random places, one in each half. The trend is a parabola of
     `trend_mag` across the pass (a phase-angle brightening); `mag_err` is the white noise level.
 
     Returns
@@ -134,10 +134,13 @@ def synthetic_lightcurve(injection: Injection) -> LightCurve:
     mag = mag + white
     keep = np.ones(n, bool)
     if injection.gap_fraction > 0:
+        # One gap in each half of the pass, so they never overlap; the ends stay observed.
         gap = int(round(injection.gap_fraction * n / 2))
-        for start in rng.choice(n - gap, size=2, replace=False):
+        half = n // 2
+        for lo in (1, half):
+            start = lo + int(rng.integers(0, max(half - gap - 1, 1)))
             keep[start:start + gap] = False
-        keep[[0, -1]] = True          # keep the pass's full span
+        keep[[0, -1]] = True
     label = (f"{injection.shape} P={injection.period_s:g}s A={injection.amplitude_mag:g} "
              f"noise={injection.noise_mag:g} seed={injection.seed}")
     return LightCurve.from_arrays(t[keep], mag[keep], np.full(keep.sum(), injection.noise_mag),

@@ -560,10 +560,14 @@ def _scan(problem: _Problem, frequency_hz: float, label: str) -> _Scored | None:
 def _refine(problem: _Problem, scored: _Scored) -> None:
     """Polish a scanned candidate with all its harmonics; the BIC picks their number."""
     data = problem.data
-    curve = nested_rss(data, scored.frequency_hz, scored.k_max)
+    # Harmonics above the scanned ones are worth trying only if the scan's BIC wanted (nearly)
+    # all of the scanned ones: a smooth curve whose BIC stopped early will not want more.
+    k_scan = len(scored.rss_curve) - 1
+    k_cap = scored.k_max if _choose(problem, scored.rss_curve) >= 0.75 * k_scan else k_scan
+    curve = nested_rss(data, scored.frequency_hz, k_cap)
     k = _choose(problem, curve)
     f = polish_frequency(data, scored.frequency_hz, k)
-    curve = nested_rss(data, f, scored.k_max)
+    curve = nested_rss(data, f, k_cap)
     k_new = _choose(problem, curve)
     if k_new != k:
         # A refined frequency keeps high harmonics coherent, so the BIC may then want more of them.
@@ -791,9 +795,12 @@ def _rank(problem: _Problem) -> tuple[Candidate, ...]:
     scored = sorted(problem.scored, key=lambda s: s.bic)
     periods = np.array([s.fit.period_s for s in scored])
     bins = np.maximum(2, np.round(periods / problem.pdm_bin_s)).astype(int)
-    theta = dispersion.pdm(problem.data.t_s, problem.y_detrended, periods, bins)
-    binned_bic = dispersion.pdm_bic(problem.data.t_s, problem.y_detrended, periods, bins)
+    n = problem.data.n_points
     within, occupied = dispersion.pdm_within(problem.data.t_s, problem.y_detrended, periods, bins)
+    total = float(np.sum((problem.y_detrended - problem.y_detrended.mean()) ** 2))
+    # Stellingwerf's theta and the binned model's BIC, as in rsodb.dispersion.pdm / pdm_bic.
+    theta = (within / np.maximum(n - occupied, 1)) / (total / (n - 1))
+    binned_bic = n * np.log(np.maximum(within, 1e-300) / n) + occupied * math.log(n)
     problem.pdm_within.update({float(p): (float(w), float(m)) for p, w, m in zip(periods, within, occupied)})
     strings = dispersion.string_length(problem.data.t_s, problem.y_detrended, periods)
     best_bic = scored[0].bic
