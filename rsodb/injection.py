@@ -31,6 +31,8 @@ __all__ = ["SHAPES", "Injection", "synthetic_lightcurve", "shape_mag", "recover"
 
 # Recovered = inside the +-1% prior a fit would start from.
 RECOVERY_TOLERANCE = 0.01
+# Midpoint sub-samples per exposure (a 2%-wide glint at 2 s spans ~1 sub-sample of 0.2 s / 16).
+_EXPOSURE_SUBSAMPLES = 16
 
 
 def _sinusoid(phase, asymmetry):
@@ -101,7 +103,8 @@ class Injection:
 def synthetic_lightcurve(injection: Injection) -> LightCurve:
     """The light curve of an `Injection` (its `seed` makes it reproducible).
 
-    The pass lasts ``n_points * cadence_s``; samples are regular, then gaps remove
+    The pass lasts ``n_points * cadence_s``; samples are regular and integrate the flux over
+    an exposure equal to the cadence (16 midpoint sub-samples), then gaps remove
     `gap_fraction` of the pass in two blocks at random places, one in each half. The trend is a parabola of
     `trend_mag` across the pass (a phase-angle brightening); `mag_err` is the white noise level.
 
@@ -121,9 +124,13 @@ def synthetic_lightcurve(injection: Injection) -> LightCurve:
     duration = t[-1]
     phase0 = rng.random()
     x = t / duration - 0.5
-    mag = (6.0 + injection.amplitude_mag * shape_mag(injection.shape, t / injection.period_s + phase0,
-                                                     injection.asymmetry)
-           + injection.trend_mag * (4 * x * x - 1 / 3) + 0.3 * injection.trend_mag * x)
+    # Each sample integrates the flux over its exposure (= the cadence), as a camera does: a
+    # glint narrower than the cadence, sampled at points, would alias into a false period.
+    offsets = injection.cadence_s * ((np.arange(_EXPOSURE_SUBSAMPLES) + 0.5) / _EXPOSURE_SUBSAMPLES - 0.5)
+    phase = (t[:, None] + offsets[None, :]) / injection.period_s + phase0
+    periodic = injection.amplitude_mag * shape_mag(injection.shape, phase, injection.asymmetry)
+    periodic = -2.5 * np.log10(np.mean(10 ** (-0.4 * periodic), axis=1))
+    mag = 6.0 + periodic + injection.trend_mag * (4 * x * x - 1 / 3) + 0.3 * injection.trend_mag * x
     white = rng.normal(0.0, injection.noise_mag, n)
     rho = injection.red_noise_rho
     if rho > 0:

@@ -478,6 +478,7 @@ class _Problem:
     data: SeriesData          # magnitudes as given (the trend is fitted jointly)
     y_detrended: np.ndarray   # for the dispersion scores
     duration_s: float
+    cadence_s: float
     nyquist_hz: float
     ceiling_hz: float
     peak_hz: float
@@ -719,7 +720,7 @@ def find_period(lightcurve: LightCurve, geometry=None, settings: PeriodSettings 
     nyquist = 0.5 / lc.cadence_s
     problem = _Problem(
         data=SeriesData.from_arrays(lc.t_s, lc.mag, lc.weights(settings.error_floor_mag), settings.trend_degree),
-        y_detrended=detrended.mag, duration_s=duration, nyquist_hz=nyquist,
+        y_detrended=detrended.mag, duration_s=duration, cadence_s=lc.cadence_s, nyquist_hz=nyquist,
         ceiling_hz=min(nyquist, settings.harmonic_ceiling * f_peak), peak_hz=f_peak, settings=settings,
         pdm_bin_s=1.0 / (f_peak * settings.pdm_bins),
     )
@@ -826,6 +827,11 @@ def _verdict(problem: _Problem, candidates: tuple[Candidate, ...], fap: float, s
     if not snr >= s.snr_threshold:
         return "no signal", (f"the strongest harmonic of {best.period_s:.4g} s is only {snr:.1f} times the residual "
                              f"noise around it (below {s.snr_threshold:g}): the variation does not repeat")
+    aliased = _cadence_alias(problem, best, candidates)
+    if aliased is not None:
+        return "ambiguous harmonic", (f"{best.period_s:.4g} s may be an artefact of the sampling: {aliased.period_s:.4g} s "
+                                      f"spans {aliased.period_s / problem.cadence_s:.2f} samples, so its harmonics above "
+                                      f"the Nyquist frequency alias onto those of {best.period_s:.4g} s")
     rivals = [c for c in candidates[1:] if c.delta_bic < s.bic_margin]
     if rivals:
         return "ambiguous harmonic", (f"{rivals[0].period_s:.4g} s fits nearly as well as {best.period_s:.4g} s "
@@ -852,6 +858,26 @@ def _verdict(problem: _Problem, candidates: tuple[Candidate, ...], fap: float, s
     confirmed = (f", phase dispersion confirms it over {weakest[0].period_s:.4g} s (p = {weakest[1]:.1g})"
                  if weakest is not None else "")
     return "confident", f"{best.period_s:.4g} s {beaten}{confirmed}, S/N {snr:.0f}"
+
+
+def _cadence_alias(problem: _Problem, best: Candidate, candidates) -> Candidate | None:
+    """A shorter candidate P dividing the best period r P whose sampling makes r P spurious.
+
+    With regular samples every ``dt``, harmonic k of ``1 / P`` above the Nyquist frequency
+    appears at ``|1 / dt - k / P|``. When ``P / dt`` is within ``P / T`` (one resolution
+    element) of ``m + j / r`` with ``j`` not a multiple of r, those aliases fall on harmonics of
+    ``1 / (r P)`` that P itself lacks, and the sampled curve really repeats only every r P.
+    """
+    for c in candidates[1:]:
+        ratio = best.period_s / c.period_s
+        r = int(round(ratio))
+        if r < 2 or abs(ratio - r) > 0.02 * ratio:
+            continue
+        samples = r * c.period_s / problem.cadence_s
+        k = int(round(samples))
+        if k % r and abs(samples - k) < r * c.period_s / problem.duration_s:
+            return c
+    return None
 
 
 def analyse_pass(pass_, settings: PeriodSettings | None = None, *, geometry: bool = True) -> PeriodResult:
