@@ -5,7 +5,7 @@ renders one file with no external references (figures are base64 PNGs in ``<img>
 the style sheet is inline), so a report can be mailed or archived as it is.
 
 >>> doc = Document("Spin periods").add(Heading("Summary"), Paragraph("3 passes."))
->>> "<h2>Summary</h2>" in doc.to_html()
+>>> '<h2 id="summary">Summary</h2>' in doc.to_html()
 True
 """
 from __future__ import annotations
