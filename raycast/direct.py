@@ -291,6 +291,41 @@ class DirectRenderer:
                 total[idx] += weight * mesh.brdfs[material](wi, wo_m, normal) * cos_shade
         return total
 
+    def image(self, sun_body, obs_body):
+        """What a camera looking along ``-obs_body`` sees: radiance per unit irradiance, 1/sr.
+
+        Parameters
+        ----------
+        sun_body, obs_body : (3,) float, one direction pair.
+
+        Returns
+        -------
+        (rows, columns) float image; its sum times ``pixel_size_m**2`` is :meth:`intensity`
+        (up to the sub-pixel offset). Rows run along the grid's second axis.
+        """
+        sun, obs = _check_directions(np.atleast_2d(sun_body), np.atleast_2d(obs_body))
+        mesh, scene = self._prepared()
+        u, v = orthonormal_basis(obs)
+        rel = mesh.vertices_m - mesh.center_m
+        pu, pv = rel @ u[0], rel @ v[0]
+        h = self.pixel_size_m
+        cu = np.arange(pu.min() - h, pu.max() + h, h)
+        cv = np.arange(pv.min() - h, pv.max() + h, h)
+        grid_u, grid_v = np.meshgrid(cu, cv)
+        origins = (mesh.center_m + grid_u.reshape(-1, 1) * u[0] + grid_v.reshape(-1, 1) * v[0]
+                   + (mesh.radius_m + 1.0) * obs[0])
+        rays = np.concatenate([origins, np.broadcast_to(-obs[0], origins.shape)], axis=1).astype(np.float32)
+        hits = scene.cast_rays(rays)
+        t_hit = hits["t_hit"].numpy()
+        hit = np.flatnonzero(np.isfinite(t_hit))
+        radiance = np.zeros(len(rays))
+        if len(hit):
+            frames = np.zeros(len(hit), dtype=np.int64)
+            points = rays[hit, :3] + t_hit[hit, None] * rays[hit, 3:]
+            radiance[hit] = self._shade(mesh, scene, frames, hits["primitive_ids"].numpy()[hit].astype(np.int64),
+                                        hits["primitive_uvs"].numpy()[hit], points, sun, obs)
+        return radiance.reshape(grid_u.shape)
+
     def _prepared(self):
         if "mesh" not in self._state:
             mesh = self.scene.posed()

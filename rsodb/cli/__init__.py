@@ -19,6 +19,7 @@ COMMAND_MODULES = [
     "show",
     "export",
     "periods",
+    "render",
     "report",
     "fit",
     "campaign",
