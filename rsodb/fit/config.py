@@ -20,6 +20,7 @@ parameters plus a jitter term, spin-period prior +-1% around the stored period, 
     start_s = 0.0                 # fit the samples from start_s ...
     duration_s = 0.0              # ... for duration_s seconds (0 = to the end of the pass)
     stride = 1                    # keep every stride-th sample
+    max_points = 0                # then at most this many, evenly spread (0 = no limit)
     keep_saturated = false
     mag_err_floor = 0.0           # errors below this are raised to it (mag)
 
@@ -111,6 +112,7 @@ class DataConfig:
     start_s: float = 0.0
     duration_s: float = 0.0
     stride: int = 1
+    max_points: int = 0
     keep_saturated: bool = False
     mag_err_floor: float = 0.0
 
@@ -121,6 +123,8 @@ class DataConfig:
                 raise ValueError(f"[data] {name}={value!r} must be a number >= 0")
         if not (isinstance(self.stride, int) and self.stride >= 1):
             raise ValueError(f"[data] stride={self.stride!r} must be a whole number >= 1")
+        if not (isinstance(self.max_points, int) and (self.max_points == 0 or self.max_points >= 10)):
+            raise ValueError(f"[data] max_points={self.max_points!r} must be 0 (no limit) or a whole number >= 10")
 
 
 @dataclass(frozen=True)

@@ -39,7 +39,7 @@ def select_samples(observed, data) -> np.ndarray:
     """(n,) bool: the samples of `observed` to fit under `data` (a `DataConfig`).
 
     Valid, finite magnitudes with finite errors, not saturated unless asked, inside the time
-    window, every ``stride``-th.
+    window, every ``stride``-th, then at most ``max_points`` of those, evenly spread.
     """
     mag = observed.best_mag
     keep = observed.valid & np.isfinite(mag) & np.isfinite(observed.mag_err)
@@ -50,6 +50,8 @@ def select_samples(observed, data) -> np.ndarray:
     if data.duration_s > 0:
         keep &= t_s <= data.start_s + data.duration_s
     index = np.flatnonzero(keep)[:: data.stride]
+    if data.max_points and index.size > data.max_points:
+        index = index[np.unique(np.linspace(0, index.size - 1, data.max_points).round().astype(int))]
     chosen = np.zeros(len(observed), dtype=bool)
     chosen[index] = True
     return chosen

@@ -311,7 +311,8 @@ def init_from_search(posterior, settings: SamplerSettings, rng: np.random.Genera
     if result.fun >= _IMPOSSIBLE:
         raise RuntimeError("the global search found no point where the posterior is non-zero; widen the priors")
     # Polish here, in this process (scipy's own polish would call the pool-only cost function).
-    polished = minimize(_Cost(evaluator.search_posterior), result.x, method="L-BFGS-B", bounds=bounds)
+    polished = minimize(_Cost(evaluator.search_posterior), result.x, method="L-BFGS-B", bounds=bounds,
+                        options={"maxfun": 30 * space.ndim})
     best, best_cost = (polished.x, polished.fun) if polished.fun < result.fun else (result.x, result.fun)
     width = (bounds[:, 1] - bounds[:, 0]) * settings.ball_fraction
 

@@ -1,0 +1,74 @@
+"""Campaigns on a Dask LocalCluster: every pass fitted and stored, finished fits skipped on
+rerun, failures reported per pass, and the HTML campaign report."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from ingest import read_file
+from rsodb.archive import Archive
+from rsodb.campaign import run_campaign
+from rsodb.cli import main
+from rsodb.fit.config import FitConfig
+from rsodb.fit.injection import inject, window
+from rsodb.fit.runner import FitProblem
+from tests.conftest import TOPEX_PHV
+
+TRUTH = {"spin_period_s": 9.86, "spin_phase_deg": 100.0, "precession_period_s": 700.0,
+         "precession_phase_deg": 180.0, "precession_angle_deg": 35.0}
+FIT = {"name": "camp", "model": {"shape": "ellipsoid", "n_sub": 1},
+       "parameters": {"spin_period_s": {"kind": "uniform", "low": 9.5, "high": 10.2}},
+       "sampler": {"n_walkers": 12, "n_steps": 40, "search_maxiter": 8, "search_popsize": 5, "seed": 1}}
+
+
+@pytest.fixture(scope="module")
+def archive(tmp_path_factory):
+    observed = read_file(TOPEX_PHV)[0]
+    archive = Archive(tmp_path_factory.mktemp("campaign") / "archive")
+    passes = []
+    for k, start_s in enumerate((0.0, 200.0)):
+        template = window(observed, start_s, 20.0, stride=4)
+        model = FitProblem.build(template, FitConfig.from_dict(FIT)).posterior.model
+        passes.append(inject(template, model, TRUTH, noise_mag=0.02, rng=np.random.default_rng(k)))
+    archive.add(passes)
+    return archive
+
+
+@pytest.mark.slow
+def test_campaign_fits_every_pass_then_skips_them_and_reports(archive, tmp_path, capsys):
+    config = FitConfig.from_dict(FIT)
+    first = run_campaign(archive, 22076, config=config, n_workers=2, progress=False)
+    ids = [row.pass_id for row in archive.catalog(22076)]
+    assert len(ids) == 2 and first.ok
+    assert sorted(r["pass_id"] for r in first.fitted) == sorted(ids)
+    assert all(archive.result_names(p, "fits") == ["camp"] for p in ids)
+    assert first.scheduler.startswith("tcp://") or first.scheduler.startswith("inproc://")
+
+    again = run_campaign(archive, 22076, config=config, n_workers=2, progress=False)
+    assert again.fitted == () and sorted(again.skipped) == sorted(ids)
+
+    # The command line: a rerun skips both and writes the report.
+    report = tmp_path / "fits.html"
+    status = main(["campaign", "--archive", str(archive.path), "--object", "22076", "--name", "camp",
+                   "--steps", "40", "--report", str(report), "--json"])
+    outcome = json.loads(capsys.readouterr().out)
+    assert status == 0 and outcome["fitted"] == [] and len(outcome["skipped"]) == 2
+    page = report.read_text()
+    assert all(p in page for p in ids) and page.count("<img") >= 4  # period, parameters, 2 passes
+
+
+def test_campaign_reports_a_failed_pass_and_carries_on(archive):
+    # No stored period: the default spin-period prior cannot be built, for every pass.
+    config = FitConfig.from_dict(dict(FIT, name="noperiod", parameters={}))
+    outcome = run_campaign(archive, 22076, config=config, n_workers=1, progress=False)
+    assert not outcome.ok and len(outcome.failed) == 2
+    assert all("run 'rsodb periods' on it first" in error for _, error in outcome.failed)
+
+
+def test_campaign_needs_a_selection(archive, capsys):
+    with pytest.raises(ValueError, match="a campaign needs an object"):
+        run_campaign(archive, config=FitConfig.from_dict(FIT), progress=False)
+    assert main(["campaign", "--archive", str(archive.path), "--passes", "99999-nope"]) == 2
+    assert "rsodb campaign: error:" in capsys.readouterr().err
