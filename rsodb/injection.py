@@ -170,7 +170,15 @@ def _run_one(injection: Injection) -> dict:
         if result.uncertainty_s > 0 else math.nan,
         "verdict": result.verdict, "recovered": bool(recovered),
         "confident_wrong": result.verdict == "confident" and not abs(error) < RECOVERY_TOLERANCE,
+        # A confident period at P/2, P/3 or P/4: the cycle's parts alike within the noise.
+        "confident_subharmonic": result.verdict == "confident" and _is_submultiple(result.best_period_s,
+                                                                                    injection.period_s),
     }
+
+
+def _is_submultiple(found_s: float, true_s: float) -> bool:
+    ratio = true_s / found_s
+    return round(ratio) in (2, 3, 4) and abs(ratio - round(ratio)) < RECOVERY_TOLERANCE * ratio
 
 
 def recover(injections, processes: int = 1, progress: bool = False):
@@ -188,7 +196,9 @@ def recover(injections, processes: int = 1, progress: bool = False):
     -------
     pandas.DataFrame
         One row per injection: the truth, the found period, its error and pull, the verdict,
-        ``recovered`` and ``confident_wrong`` (a confident verdict outside +-1%).
+        ``recovered``, ``confident_wrong`` (a confident verdict outside +-1%) and
+        ``confident_subharmonic`` (the confidently wrong ones at P/2, P/3 or P/4: a cycle whose
+        parts look alike within the noise).
     """
     import pandas as pd
 

@@ -309,7 +309,8 @@ class PeriodResult:
         Parameters
         ----------
         width_frac : float
-            Half-width as a fraction of the period (default 1%).
+            Half-width as a fraction of the period (default 1%); widened to 3 sigma when the
+            period's error is larger.
         frame : {"sidereal", "synodic"}
             ``"synodic"``: ``P (1 +- width_frac)``. ``"sidereal"`` (the fit's spin period is
             inertial): the same interval widened on each side by the phase-angle-bisector
@@ -334,8 +335,10 @@ class PeriodResult:
                 f"pass {self.pass_id or self.label!r} has verdict {self.verdict!r} ({self.reason}); "
                 "give the spin-period prior yourself or pass force=True"
             )
-        low = self.best_period_s * (1 - width_frac)
-        high = self.best_period_s * (1 + width_frac)
+        # Never narrower than +-3 sigma: a period measured over few cycles may be less precise
+        # than the requested fraction.
+        half = max(width_frac * self.best_period_s, 3.0 * self.uncertainty_s)
+        low, high = self.best_period_s - half, self.best_period_s + half
         if frame == "sidereal" and self.synodic is not None:
             shorter, longer = self.sidereal_bounds_s
             low -= self.best_period_s - shorter
