@@ -46,7 +46,6 @@ Results are `PeriodResult` objects, stored in the archive with `to_hdf5` and rea
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field, fields, replace
-import json
 import math
 
 import numpy as np
@@ -911,7 +910,3 @@ def analyse_pass(pass_, settings: PeriodSettings | None = None, *, geometry: boo
     return replace(result, synodic=SynodicCorrection.from_geometry(result.best_period_s, pass_geometry),
                    synodic_note="")
 
-
-def result_json(results) -> str:
-    """JSON text of a list of results."""
-    return json.dumps([r.to_dict() for r in results], indent=1)

@@ -14,7 +14,7 @@ from astropy.timeseries import LombScargle
 import ingest
 from rsodb.dispersion import pdm, pdm_bic, pdm_f_test, pdm_within, string_length
 from rsodb.lightcurve import LightCurve
-from rsodb.periodogram import PERIODOGRAM_METHODS, frequency_grid, periodogram
+from rsodb.periodogram import PERIODOGRAM_METHODS, frequency_grid
 from tests.conftest import TOPEX_PHV
 
 

@@ -70,6 +70,11 @@ def trend_figure(results, trend=None):
         grid = times.min() + (times.max() - times.min()) * np.linspace(-0.02, 1.02, 50)
         ax.plot(grid.astype("datetime64[ms]").astype(object), trend.period_s(grid), color="C3", lw=1.2,
                 label=f"trend {trend.slope_s_per_yr:+.3g} +- {trend.slope_err_s_per_yr:.2g} s/yr")
+    dated = np.array([r.epoch_utc for r in results if r.epoch_utc is not None], dtype="datetime64[ns]")
+    if dated.size and dated.max() - dated.min() < np.timedelta64(2, "D"):
+        # One night: matplotlib would span years around it; show a fortnight.
+        middle = dated.min() + (dated.max() - dated.min()) / 2
+        ax.set_xlim(*(middle + np.array([-7, 7]) * np.timedelta64(1, "D")).astype("datetime64[ms]").astype(object))
     ax.set_ylabel("synodic period [s]")
     ax.set_xlabel("date (UTC)")
     ax.grid(alpha=0.3)
@@ -183,7 +188,7 @@ def build_period_report(archive, norad: int, *, name: str = "default", band: str
     missing = len(rows) - len(results)
 
     doc = Document(f"Spin periods of {object_name} (NORAD {norad})")
-    summary = (f"{len(results)} passes analysed from {str(results[0].epoch_utc)[:10]} to "
+    summary = (f"{len(results)} pass{'es' if len(results) != 1 else ''} analysed from {str(results[0].epoch_utc)[:10]} to "
                f"{str(results[-1].epoch_utc)[:10]}: " + ", ".join(f"{n} {v}" for v, n in counts.items() if n) + ".")
     if missing:
         summary += f" {missing} stored pass(es) have no result named {name!r} yet."
