@@ -69,6 +69,9 @@ DEFAULT_RESULT_NAME = "default"
 MIN_POINTS = 20
 # Significance at which phase dispersion must confirm a period over a shorter one dividing it.
 PDM_P_VALUE = 1e-3
+# Shorter candidates spanning more samples than this cannot fake a longer period by aliasing
+# (their harmonics above the Nyquist frequency, k > 12, carry no measurable power).
+ALIAS_MAX_SAMPLES = 25
 
 
 @dataclass(frozen=True)
@@ -863,17 +866,19 @@ def _verdict(problem: _Problem, candidates: tuple[Candidate, ...], fap: float, s
 
 
 def _cadence_alias(problem: _Problem, best: Candidate, candidates) -> Candidate | None:
-    """A shorter candidate P dividing the best period r P whose sampling makes r P spurious.
+    """A shorter candidate P dividing the best period r P (r = 2..4) whose sampling makes r P spurious.
 
     With regular samples every ``dt``, harmonic k of ``1 / P`` above the Nyquist frequency
     appears at ``|1 / dt - k / P|``. When ``P / dt`` is within ``P / T`` (one resolution
     element) of ``m + j / r`` with ``j`` not a multiple of r, those aliases fall on harmonics of
     ``1 / (r P)`` that P itself lacks, and the sampled curve really repeats only every r P.
+    Only periods spanning fewer than `ALIAS_MAX_SAMPLES` samples are considered: otherwise the
+    harmonics that would alias (above ``P / (2 dt)``) carry no measurable power.
     """
     for c in candidates[1:]:
         ratio = best.period_s / c.period_s
         r = int(round(ratio))
-        if r < 2 or abs(ratio - r) > 0.02 * ratio:
+        if not 2 <= r <= 4 or abs(ratio - r) > 0.02 * ratio or c.period_s / problem.cadence_s > ALIAS_MAX_SAMPLES:
             continue
         samples = r * c.period_s / problem.cadence_s
         k = int(round(samples))
