@@ -115,6 +115,7 @@ def test_render_reuses_a_prebuilt_cache():
     assert model.settings["precompute_s"] == cache.precompute_s
 
 
+@pytest.mark.slow
 def test_smooth_glossy_cylinder_glint_matches_direct():
     # A glossy smooth-shaded cylinder: its glint is a line whose width the element normals must
     # resolve; the cache's normal step (half the lobe) keeps it within 0.01 mag of the direct.

@@ -100,6 +100,7 @@ def test_penumbra_scales_and_umbra_skips(method):
     assert model.intensity_m2_sr[2] == 0.0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", METHODS)
 def test_flipped_normals_and_open_meshes(method):
     box = Part.box("box", (1.0, 2.0, 3.0), "m")
