@@ -61,7 +61,7 @@ def test_defaults_and_overrides():
 
 @pytest.mark.parametrize("record, message", [
     ({"modle": {}}, r"fit configuration \[top level\] has unknown keys \['modle'\]"),
-    ({"model": {"shape": "sphere"}}, r"\[model\] shape='sphere' is not auto or one of topex, cosmos2502, box, ellipsoid"),
+    ({"model": {"shape": "sphere"}}, r"\[model\] shape='sphere' is not auto or one of topex, cosmos2502, box, ellipsoid, lopsided"),
     ({"model": {"attitude": "wobble"}}, r"\[model\] attitude='wobble' is not one of precessing, inertial, torque_free"),
     ({"data": {"stride": 0}}, r"\[data\] stride=0 must be a whole number >= 1"),
     ({"sampler": {"n_walker": 4}}, r"\[sampler\] has unknown keys \['n_walker'\]"),

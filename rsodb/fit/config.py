@@ -9,7 +9,7 @@ parameters plus a jitter term, spin-period prior +-1% around the stored period, 
     discard = 250                 # burn-in steps dropped from the summary (default: half)
 
     [model]
-    shape = "auto"                # auto (by NORAD number, else "ellipsoid") | topex | cosmos2502 | box | ellipsoid
+    shape = "auto"                # auto (by NORAD number, else "ellipsoid") | topex | cosmos2502 | box | ellipsoid | lopsided
     attitude = "precessing"       # precessing | inertial | torque_free
     spin_axis = "z"               # body axis that spins (precessing, inertial)
     renderer = "cached"           # cached (fast path) | direct (slow reference)

@@ -49,9 +49,17 @@ class SamplerSettings:
         Ensemble size; at least twice the number of free parameters.
     n_steps : int
         Steps per walker in total (a resumed run stops at the same total).
-    init : {"search", "prior"}
-        Where walkers start: around the best point of a differential-evolution search, or
-        drawn from the prior.
+    init : {"search", "population", "prior"}
+        Where walkers start: in a small ball around the best point of a differential-evolution
+        search; at the best distinct members of that search's final population (spread over
+        the good modes of a multimodal posterior); or drawn from the prior.
+    moves : {"stretch", "de"}
+        emcee's proposal: the affine-invariant stretch move (emcee's default), or a mixture of
+        differential-evolution (80%) and snooker (20%) moves, which let walkers jump between
+        separated modes (emcee's advice for multimodal posteriors).
+    search_strategy : str
+        scipy's differential-evolution strategy (``randtobest1bin`` found the global mode of
+        test light curves more often than ``best1bin`` for the same cost).
     search_maxiter, search_popsize : int
         Generations and population multiplier of the differential-evolution search (the
         population is ``search_popsize * ndim``; light-curve posteriors are multimodal and a
@@ -74,7 +82,9 @@ class SamplerSettings:
     n_walkers: int = 20
     n_steps: int = 500
     init: str = "search"
-    search_maxiter: int = 60
+    moves: str = "stretch"
+    search_strategy: str = "randtobest1bin"
+    search_maxiter: int = 100
     search_popsize: int = 15
     search_points: int = 60
     ball_fraction: float = 1e-3
@@ -87,6 +97,8 @@ class SamplerSettings:
             value = getattr(self, name)
             if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or value < 1:
                 raise ValueError(f"sampler setting {name}={value!r} must be a positive integer")
+        if self.moves not in MOVES:
+            raise ValueError(f"sampler setting moves={self.moves!r} is not one of {', '.join(MOVES)}")
         if self.init not in INITIALISERS:
             raise ValueError(f"sampler setting init={self.init!r} is not one of {', '.join(INITIALISERS)}")
         if not (isinstance(self.processes, (int, np.integer)) and self.processes >= 0):
@@ -290,12 +302,10 @@ def init_from_prior(posterior, settings: SamplerSettings, rng: np.random.Generat
     return positions, {"method": "prior", "evaluations": evaluations}
 
 
-def init_from_search(posterior, settings: SamplerSettings, rng: np.random.Generator,
-                     evaluator: _Evaluator) -> tuple[np.ndarray, dict]:
-    """Walkers in a small ball around the best point of a differential-evolution search.
+def _search(posterior, settings: SamplerSettings, rng: np.random.Generator, evaluator: _Evaluator):
+    """Differential evolution on the search posterior, then an L-BFGS-B polish of its best point.
 
-    The search minimises ``evaluator.cost`` (minus the coarse search posterior) and polishes
-    its best point with L-BFGS-B; the ball is then checked on the full posterior.
+    Returns (result, best, best_cost, polish evaluations).
     """
     from scipy.optimize import differential_evolution, minimize
 
@@ -303,7 +313,7 @@ def init_from_search(posterior, settings: SamplerSettings, rng: np.random.Genera
     bounds = space.bounds
     result = differential_evolution(
         evaluator.cost, bounds, maxiter=settings.search_maxiter, popsize=settings.search_popsize,
-        seed=int(rng.integers(2**31)), polish=False, init="sobol", tol=1e-8,
+        strategy=settings.search_strategy, seed=int(rng.integers(2**31)), polish=False, init="sobol", tol=1e-8,
         # "deferred" updating evaluates whole generations through `map`: the same search
         # whether it runs here or in the pool.
         workers=evaluator.map, updating="deferred",
@@ -314,6 +324,24 @@ def init_from_search(posterior, settings: SamplerSettings, rng: np.random.Genera
     polished = minimize(_Cost(evaluator.search_posterior), result.x, method="L-BFGS-B", bounds=bounds,
                         options={"maxfun": 30 * space.ndim})
     best, best_cost = (polished.x, polished.fun) if polished.fun < result.fun else (result.x, result.fun)
+    return result, best, best_cost, int(polished.nfev)
+
+
+def _search_info(method, result, best, best_cost, evaluations) -> dict:
+    return {"method": method, "evaluations": evaluations, "search_best_log_prob": float(-best_cost),
+            "search_best": best.tolist(), "search_generations": int(result.nit)}
+
+
+def init_from_search(posterior, settings: SamplerSettings, rng: np.random.Generator,
+                     evaluator: _Evaluator) -> tuple[np.ndarray, dict]:
+    """Walkers in a small ball around the best point of a differential-evolution search.
+
+    The search minimises ``evaluator.cost`` (minus the coarse search posterior) and polishes
+    its best point with L-BFGS-B; the ball is then checked on the full posterior.
+    """
+    space = posterior.space
+    result, best, best_cost, polish_evaluations = _search(posterior, settings, rng, evaluator)
+    bounds = space.bounds
     width = (bounds[:, 1] - bounds[:, 0]) * settings.ball_fraction
 
     def ball(k: int) -> np.ndarray:
@@ -321,12 +349,52 @@ def init_from_search(posterior, settings: SamplerSettings, rng: np.random.Genera
         return _reflect_into(theta, bounds, space.periods)
 
     positions, evaluations = _finite_or_redraw(evaluator, ball, settings.n_walkers, "around the search's best point")
-    return positions, {"method": "search", "evaluations": int(result.nfev + polished.nfev) + evaluations,
-                       "search_best_log_prob": float(-best_cost), "search_best": best.tolist(),
-                       "search_generations": int(result.nit)}
+    return positions, _search_info("search", result, best, best_cost,
+                                   int(result.nfev) + polish_evaluations + evaluations)
 
 
-INITIALISERS = {"prior": init_from_prior, "search": init_from_search}
+def init_from_population(posterior, settings: SamplerSettings, rng: np.random.Generator,
+                         evaluator: _Evaluator) -> tuple[np.ndarray, dict]:
+    """Walkers at the polished best point and the best other members of the search's last population.
+
+    Members whose posterior is zero are replaced by points in a small ball around the best.
+    """
+    space = posterior.space
+    result, best, best_cost, polish_evaluations = _search(posterior, settings, rng, evaluator)
+    order = np.argsort(result.population_energies)
+    members = np.unique(result.population[order], axis=0, return_index=True)[1]
+    chosen = result.population[order][np.sort(members)][: settings.n_walkers - 1]
+    positions = np.vstack([best[None, :], chosen])
+    bounds = space.bounds
+    width = (bounds[:, 1] - bounds[:, 0]) * settings.ball_fraction
+    while positions.shape[0] < settings.n_walkers:
+        positions = np.vstack([positions, _reflect_into(best + width * rng.standard_normal(space.ndim), bounds,
+                                                        space.periods)[None, :]])
+    values = np.array(list(evaluator.map(evaluator.log_prob, positions)))
+    bad = ~np.isfinite(values)
+    evaluations = settings.n_walkers
+    if bad.any():
+        def ball(k: int) -> np.ndarray:
+            return _reflect_into(best + width * rng.standard_normal((k, space.ndim)), bounds, space.periods)
+
+        positions[bad], extra = _finite_or_redraw(evaluator, ball, int(bad.sum()), "around the search's best point")
+        evaluations += extra
+    return positions, _search_info("population", result, best, best_cost,
+                                   int(result.nfev) + polish_evaluations + evaluations)
+
+
+INITIALISERS = {"prior": init_from_prior, "search": init_from_search, "population": init_from_population}
+
+
+def _moves(name: str):
+    import emcee
+
+    if name == "de":
+        return [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)]
+    return None  # emcee's default stretch move
+
+
+MOVES = ("stretch", "de")
 
 
 # -- chain file -------------------------------------------------------------------------
@@ -356,7 +424,7 @@ def _stored_iteration(chain_path: Path) -> int | None:
 def _run_identity(posterior, settings: SamplerSettings) -> dict:
     """What must match for a stored chain to be continued by this run."""
     return {"names": list(posterior.space.names), "n_walkers": settings.n_walkers, "seed": settings.seed,
-            "init": settings.init, "space": posterior.space.to_dict()}
+            "init": settings.init, "moves": settings.moves, "space": posterior.space.to_dict()}
 
 
 def _prepare_chain_file(chain_path: Path, identity: dict, restart: bool) -> int:
@@ -467,14 +535,14 @@ def run_sampler(posterior, settings: SamplerSettings, chain_path: str | Path, *,
                 handle.attrs["rsodb_run"] = json.dumps(identity)
                 handle.attrs["rsodb_init"] = json.dumps(init_info)
             sampler = emcee.EnsembleSampler(settings.n_walkers, space.ndim, evaluator.log_prob,
-                                            pool=pool, backend=backend)
+                                            pool=pool, backend=backend, moves=_moves(settings.moves))
             state = emcee.State(positions, random_state=np.random.RandomState(settings.seed).get_state())
         else:
             with h5py.File(chain_path, "r") as handle:
                 init_info = dict(json.loads(handle.attrs.get("rsodb_init", "{}")), resumed_at=stored)
             if remaining:
                 sampler = emcee.EnsembleSampler(settings.n_walkers, space.ndim, evaluator.log_prob,
-                                                pool=pool, backend=backend)
+                                                pool=pool, backend=backend, moves=_moves(settings.moves))
                 state = None  # continue from the backend's last step and random state
         if remaining:
             start = state if state is not None else backend.get_last_sample()

@@ -82,6 +82,13 @@ def _ellipsoid():
     return ConvexFacets.ellipsoid((1.0, 0.5, 0.35), subdivisions=2, albedo=0.2)
 
 
+def _lopsided():
+    body = ConvexFacets.ellipsoid((1.0, 0.5, 0.35), subdivisions=2, albedo=0.2)
+    # Bright +x half, dark -x half, brighter still where +y: no rotation maps the body onto itself.
+    albedo = np.where(body.normals[:, 0] > 0, 0.3, 0.1) + np.where(body.normals[:, 1] > 0, 0.1, 0.0)
+    return ConvexFacets(body.normals, body.areas_m2, albedo)
+
+
 SHAPES: Mapping[str, Shape] = MappingProxyType({
     "topex": Shape(_topex, {"panel_pitch_deg": 12.0}, False,
                    "TOPEX/Poseidon: bus, solar array (pitch 12 deg per the published fit), antennas"),
@@ -91,6 +98,9 @@ SHAPES: Mapping[str, Shape] = MappingProxyType({
                        "a Lambertian triaxial ellipsoid, semi-axes 1 x 0.5 x 0.35 m along body x, y, z, albedo 0.2, "
                        "320 facets (analytic; the generic shape for objects without a model: spinning about z "
                        "it tumbles end over end)"),
+    "lopsided": Shape(_lopsided, {}, True,
+                      "the ellipsoid with albedo 0.4 / 0.3 / 0.2 / 0.1 on its +x+y / +x-y / -x+y / -x-y quarters: "
+                      "no rotational symmetry, so every phase is observable (for calibration studies)"),
 })
 
 # Objects whose model the project has, by NORAD number.
