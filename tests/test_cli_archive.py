@@ -109,7 +109,7 @@ def test_show_text_json_and_plot(archive_dir, tmp_path, capsys):
 def test_export_csv_round_trip(archive_dir, tmp_path, capsys):
     out = tmp_path / "topex.csv"
     assert main(["export", "22076", "--archive", str(archive_dir), "--format", "csv", "--out", str(out)]) == 0
-    frame = pd.read_csv(out, index_col="time_utc")
+    frame = pd.read_csv(out, index_col="time_utc", float_precision="round_trip")
     (topex,) = ingest.read_file(TOPEX_PHV)
     assert len(frame) == len(topex)
     times = pd.to_datetime(frame.index, format="ISO8601").tz_localize(None).values

@@ -26,10 +26,15 @@ from tests.conftest import REAL_FILES
 
 @pytest.fixture(scope="module")
 def surveyed(tmp_path_factory):
-    """An archive of the four real files, surveyed by the CLI on a 2-process pool."""
+    """An archive of the four real files with a stored period survey.
+
+    The survey is run here, not left to the CLI test: pytest-xdist may run any test of this module
+    first, on any worker.  The CLI test surveys again, which replaces the stored results.
+    """
     path = tmp_path_factory.mktemp("archive")
     archive = Archive(path)
     archive.ingest([str(f) for f in REAL_FILES], progress=False)
+    survey_periods(archive, processes=1, progress=False)
     return path
 
 
