@@ -2,8 +2,9 @@
 
 Workers (a ``spawn`` process pool, `rsodb.pool`) each open the archive read-only, read their
 pass, compute its geometry from the pass's elements and find its period; the main process
-stores each result in the archive as it arrives (``archive.store_result(pass_id, "periods",
-name, result)``, atomic like every archive write), so an interrupted survey keeps what it
+stores the results as they arrive, in batches (``archive.store_results``, one atomic commit
+per object, at most `STORE_EVERY` results or `STORE_EVERY_S` seconds apart, and whatever is
+pending when the survey stops or is interrupted), so an interrupted survey keeps what it
 finished. A pass that fails is reported with its error and does not stop the others.
 
 >>> from rsodb.archive import Archive                                   # doctest: +SKIP
@@ -14,11 +15,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import json
+import time
 
 from rsodb.periods import DEFAULT_RESULT_NAME, PeriodResult, PeriodSettings, analyse_pass
 from rsodb.pool import imap_in_pool
 
 __all__ = ["survey_periods", "PeriodSurvey", "load_period_results"]
+
+# Results held before a batched store (each store rewrites the object's file once).
+STORE_EVERY = 200
+STORE_EVERY_S = 30.0
 
 
 @dataclass(frozen=True)
@@ -104,15 +110,25 @@ def survey_periods(archive, norad: int | None = None, *, band: str | None = None
     settings = settings or PeriodSettings()
     rows = archive.catalog(norad, band)
     tasks = [(str(archive.path), row.pass_id, settings.to_dict(), geometry) for row in rows]
-    results, failures = [], []
-    for pass_id, result, error in imap_in_pool(_analyse_stored, tasks, processes=processes, progress=progress,
-                                               description="periods", chunksize=1):
-        if result is None:
-            failures.append((pass_id, error))
-            continue
-        if store:
-            archive.store_result(pass_id, "periods", name, result)
-        results.append(result)
+    results, failures, unstored = [], [], []
+    last_store_s = time.monotonic()
+    try:
+        for pass_id, result, error in imap_in_pool(_analyse_stored, tasks, processes=processes,
+                                                   progress=progress, description="periods", chunksize=1):
+            if result is None:
+                failures.append((pass_id, error))
+                continue
+            results.append(result)
+            if store:
+                unstored.append((pass_id, "periods", name, result))
+            # Each commit rewrites the object's file: store in batches, but never hold more than
+            # STORE_EVERY results or STORE_EVERY_S seconds of work that a crash would lose.
+            if len(unstored) >= STORE_EVERY or (unstored and time.monotonic() - last_store_s > STORE_EVERY_S):
+                archive.store_results(unstored)
+                unstored, last_store_s = [], time.monotonic()
+    finally:
+        if unstored:
+            archive.store_results(unstored)
     order = {row.pass_id: i for i, row in enumerate(rows)}
     results.sort(key=lambda r: order[r.pass_id])
     failures.sort(key=lambda f: order[f[0]])

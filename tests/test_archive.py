@@ -236,6 +236,29 @@ def test_results_are_stored_atomically(real_archive):
     assert not [name for name in os.listdir(real_archive.objects_dir) if name.endswith(".tmp")]
 
 
+def test_batched_results_make_one_commit_per_object(real_archive):
+    v, b = "51511-20250130T171941-V-uzhhorod", "51511-20250130T171941-B-uzhhorod"
+    topex = "22076-20240730T212240-V-derenivka"
+    before = {norad: real_archive.object_path(norad).stat().st_mtime_ns for norad in (22076, 44517, 51511)}
+    commits = real_archive.store_results([
+        (v, "periods", "default", Periods(4.93, [1.0])),
+        (b, "periods", "default", Periods(4.926, [2.0])),
+        (topex, "periods", "default", Periods(9.48, [3.0])),
+        (v, "periods", "default", Periods(4.9299, [4.0])),   # later items replace earlier ones
+    ])
+    assert commits == 2
+    after = {norad: real_archive.object_path(norad).stat().st_mtime_ns for norad in (22076, 44517, 51511)}
+    assert after[44517] == before[44517] and after[22076] != before[22076] and after[51511] != before[51511]
+    loaded = {pid: real_archive.load_result(pid, "periods", "default", Periods.from_hdf5) for pid in (v, b, topex)}
+    assert [loaded[pid].best_period_s for pid in (v, b, topex)] == [4.9299, 4.926, 9.48]
+    np.testing.assert_array_equal(loaded[v].power, [4.0])
+
+    # A bad item anywhere in the batch is refused before anything is written.
+    with pytest.raises(ValueError, match=r"result kind 'period' is not one of periods, fits"):
+        real_archive.store_results([(topex, "periods", "second", Periods(1.0, [1])), (v, "period", "x", Periods(1.0, [1]))])
+    assert real_archive.result_names(topex, "periods") == ["default"]
+
+
 def test_result_arguments_are_checked(real_archive):
     pass_id = "44517-20250130T173650-V-derenivka"
     with pytest.raises(ValueError, match=r"result kind 'period' is not one of periods, fits"):

@@ -457,25 +457,58 @@ class Archive:
         result : object with ``to_hdf5(group)``
             Writes itself into the given h5py group. If it raises, the archive is unchanged.
         """
-        self._check_result_key(kind, name)
-        if not callable(getattr(result, "to_hdf5", None)):
-            raise TypeError(f"{type(result).__name__} has no to_hdf5(group) method, so it cannot be stored")
-        row = self.summary(pass_id)
-        final = self.object_path(row.norad)
-        with self._lock(row.norad):
-            self._remove_own_temp_files(row.norad)
-            _, attrs = self._read_for_update(final)
-            with self._next_version(final, attrs, row.norad) as file:
-                kind_group = file["passes"][row.pass_id].require_group(kind)
-                if name in kind_group:
-                    file.attrs["freed_bytes"] = int(file.attrs.get("freed_bytes", 0)) + _storage_bytes(kind_group[name])
-                    del kind_group[name]
-                group = kind_group.create_group(name)
-                now = _utc_now()
-                group.attrs["stored_utc"] = now
-                group.attrs["result_type"] = f"{type(result).__module__}.{type(result).__qualname__}"
-                result.to_hdf5(group)
-                file.attrs["updated_utc"] = now
+        self.store_results([(pass_id, kind, name, result)])
+
+    def store_results(self, items: Iterable[tuple[str, str, str, object]]) -> int:
+        """Store many results with one atomic commit per object (see `store_result`).
+
+        Every commit rewrites the object's file, so storing the results of a survey one by one
+        costs a file copy each; this writes all of an object's results in one.
+
+        Parameters
+        ----------
+        items : iterable of (pass_id, kind, name, result)
+            As the arguments of `store_result`. Later items replace earlier ones with the same
+            pass, kind and name.
+
+        Returns
+        -------
+        int
+            The number of commits made (objects touched).
+
+        Raises
+        ------
+        ValueError, TypeError, KeyError
+            Before anything is written, for a bad kind, name, result or pass id. If a result's
+            ``to_hdf5`` raises, its object's commit is abandoned; objects committed before it
+            keep their results.
+        """
+        by_norad: dict[int, list[tuple[PassSummary, str, str, object]]] = {}
+        for pass_id, kind, name, result in items:
+            self._check_result_key(kind, name)
+            if not callable(getattr(result, "to_hdf5", None)):
+                raise TypeError(f"{type(result).__name__} has no to_hdf5(group) method, so it cannot be stored")
+            row = self.summary(pass_id)
+            by_norad.setdefault(row.norad, []).append((row, kind, name, result))
+        for norad, entries in by_norad.items():
+            final = self.object_path(norad)
+            with self._lock(norad):
+                self._remove_own_temp_files(norad)
+                _, attrs = self._read_for_update(final)
+                with self._next_version(final, attrs, norad) as file:
+                    now = _utc_now()
+                    for row, kind, name, result in entries:
+                        kind_group = file["passes"][row.pass_id].require_group(kind)
+                        if name in kind_group:
+                            file.attrs["freed_bytes"] = (int(file.attrs.get("freed_bytes", 0))
+                                                         + _storage_bytes(kind_group[name]))
+                            del kind_group[name]
+                        group = kind_group.create_group(name)
+                        group.attrs["stored_utc"] = now
+                        group.attrs["result_type"] = f"{type(result).__module__}.{type(result).__qualname__}"
+                        result.to_hdf5(group)
+                    file.attrs["updated_utc"] = now
+        return len(by_norad)
 
     def load_result(self, pass_id: str, kind: str, name: str, loader: Callable[[h5py.Group], object]):
         """Return ``loader(group)`` for a stored result (the file is closed after `loader` returns)."""
