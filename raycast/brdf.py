@@ -6,6 +6,20 @@ normal ``n``. All three are ``(m, 3)`` unit vectors pointing *away* from the sur
 toward the Sun, ``wo`` toward the observer). Every BRDF returns 0 where ``wi`` or ``wo`` lies
 below the shading plane.
 
+Isotropic BRDFs depend on three cosines only, so each class implements
+``from_cosines(cos_i, cos_o, cos_io)`` (cos_i = n.wi, cos_o = n.wo, cos_io = wi.wo, any
+broadcastable shapes) and ``__call__`` computes them. Renderers evaluate whole (frames, surface
+elements) blocks from matrix products of directions and normals this way.
+
+``shade(cos_i, cos_o, cos_io)`` is what the renderers use on smooth-shaded meshes: the same
+value, except that diffuse terms are not cut where the observer is below the *shading* normal's
+horizon (only ``cos_i > 0`` is required of them; the renderer tests the observer against the
+geometric normal). A Lambertian surface's radiance does not depend on the view, and on a
+low-poly smooth-shaded mesh the shading normal leans up to tens of degrees from the face:
+cutting it there would darken a band of faces the observer does see. Blender Cycles does the
+same (docs/cycles.md, calibration table). Specular lobes keep the cut (Cycles bends the normal
+instead; see docs/renderer.md).
+
 Implementations
 ---------------
 Lambertian
@@ -93,8 +107,17 @@ class BRDF:
 
     lobe_width_rad: float | None = None
 
-    def __call__(self, wi, wo, n):  # pragma: no cover - interface
+    def __call__(self, wi, wo, n):
+        wi, wo, n = np.asarray(wi), np.asarray(wo), np.asarray(n)
+        return self.from_cosines(_dot(wi, n), _dot(wo, n), _dot(wi, wo))
+
+    def from_cosines(self, cos_i, cos_o, cos_io):  # pragma: no cover - interface
+        """f_r in 1/sr from cos(n, wi), cos(n, wo) and cos(wi, wo) (broadcastable arrays)."""
         raise NotImplementedError
+
+    def shade(self, cos_i, cos_o, cos_io):
+        """f_r as the renderers apply it: diffuse terms need only ``cos_i > 0`` (module docstring)."""
+        return self.from_cosines(cos_i, cos_o, cos_io)
 
 
 @dataclass(frozen=True)
@@ -111,22 +134,23 @@ class Lambertian(BRDF):
     def __post_init__(self):
         _check_unit_interval("albedo", self.albedo, "Lambertian")
 
-    def __call__(self, wi, wo, n):
-        ci = _dot(wi, n)
-        co = _dot(wo, n)
-        return np.where((ci > 0.0) & (co > 0.0), self.albedo / np.pi, 0.0)
+    def from_cosines(self, cos_i, cos_o, cos_io):
+        return np.where((cos_i > 0.0) & (cos_o > 0.0), self.albedo / np.pi, 0.0)
+
+    def shade(self, cos_i, cos_o, cos_io):
+        return np.where(cos_i > 0.0, self.albedo / np.pi, 0.0)
 
 
-def _ggx_lobe(wi, wo, n, alpha, masking):
-    """D G / (4 cos i cos o) and cos(h, wi) for the valid pairs; zero elsewhere."""
-    ci = _dot(wi, n)
-    co = _dot(wo, n)
+def _ggx_lobe(ci, co, cos_io, alpha, masking):
+    """D G / (4 cos i cos o) and cos(h, wi) for the valid pairs; zero elsewhere.
+
+    With h = (wi + wo) / |wi + wo| and |wi + wo| = sqrt(2 + 2 cos_io):
+    n.h = (cos_i + cos_o) / |wi + wo| and h.wi = |wi + wo| / 2.
+    """
     valid = (ci > 0.0) & (co > 0.0)
-    h = wi + wo
-    h_len = np.linalg.norm(h, axis=-1)
-    h = h / np.where(h_len > 0.0, h_len, 1.0)[..., None]
-    cos_nh = np.clip(_dot(n, h), 0.0, 1.0)
-    cos_hi = np.clip(_dot(h, wi), 0.0, 1.0)
+    h_len = np.sqrt(np.maximum(2.0 + 2.0 * cos_io, 0.0))
+    cos_nh = np.clip((ci + co) / np.where(h_len > 0.0, h_len, 1.0), 0.0, 1.0)
+    cos_hi = np.clip(0.5 * h_len, 0.0, 1.0)
     ci_safe = np.where(valid, ci, 1.0)
     co_safe = np.where(valid, co, 1.0)
     lam_i = smith_lambda(ci_safe, alpha)
@@ -172,8 +196,8 @@ class GGX(BRDF):
     def lobe_width_rad(self) -> float:
         return self.alpha
 
-    def __call__(self, wi, wo, n):
-        value, _ = _ggx_lobe(wi, wo, n, self.alpha, self.masking)
+    def from_cosines(self, cos_i, cos_o, cos_io):
+        value, _ = _ggx_lobe(cos_i, cos_o, cos_io, self.alpha, self.masking)
         return self.color * value
 
 
@@ -226,7 +250,10 @@ class Principled(BRDF):
 
     def specular(self, wi, wo, n):
         """The dielectric specular lobe alone (reciprocal), shape (m,)."""
-        lobe, cos_hi = _ggx_lobe(wi, wo, n, self.alpha, "height-correlated")
+        return self._specular(_dot(wi, n), _dot(wo, n), _dot(wi, wo))
+
+    def _specular(self, cos_i, cos_o, cos_io):
+        lobe, cos_hi = _ggx_lobe(cos_i, cos_o, cos_io, self.alpha, "height-correlated")
         return lobe * _generalized_fresnel(cos_hi, self.f0, self.ior)
 
     def diffuse_weight(self, cos_o):
@@ -234,15 +261,18 @@ class Principled(BRDF):
         grid, albedo = self._albedo_table
         return 1.0 - np.interp(np.clip(cos_o, grid[0], 1.0), grid, albedo)
 
-    def __call__(self, wi, wo, n):
-        co = _dot(wo, n)
-        ci = _dot(wi, n)
-        valid = (ci > 0.0) & (co > 0.0)
-        dielectric = self.specular(wi, wo, n) + np.where(
-            valid, self.diffuse_weight(co) * self.base_color / np.pi, 0.0)
+    def from_cosines(self, cos_i, cos_o, cos_io):
+        return self._evaluate(cos_i, cos_o, cos_io, (cos_i > 0.0) & (cos_o > 0.0))
+
+    def shade(self, cos_i, cos_o, cos_io):
+        return self._evaluate(cos_i, cos_o, cos_io, cos_i > 0.0)
+
+    def _evaluate(self, ci, co, cos_io, diffuse_valid):
+        dielectric = self._specular(ci, co, cos_io) + np.where(
+            diffuse_valid, self.diffuse_weight(np.maximum(co, 0.0)) * self.base_color / np.pi, 0.0)
         if self.metallic == 0.0:
             return dielectric
-        lobe, cos_hi = _ggx_lobe(wi, wo, n, self.alpha, "height-correlated")
+        lobe, cos_hi = _ggx_lobe(ci, co, cos_io, self.alpha, "height-correlated")
         schlick = self.base_color + (1.0 - self.base_color) * (1.0 - cos_hi) ** 5
         return (1.0 - self.metallic) * dielectric + self.metallic * lobe * schlick
 

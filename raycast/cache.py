@@ -46,6 +46,8 @@ __all__ = ["SceneCache", "cube_grid_directions", "cube_grid_weights"]
 
 _MAX_RAYS_PER_BATCH = 2_000_000
 _MAX_LEVEL = 16
+# Groups of at most this many occludable elements keep their visibility columns as they are.
+_FACTOR_MIN_ELEMENTS = 4
 
 
 def cube_grid_directions(grid_size):
@@ -107,15 +109,14 @@ def _subdivision_template(level):
 class _Pose:
     """Elements of one articulation pose."""
 
-    normal_shade: np.ndarray    # (g, 3) per group
-    normal_geo: np.ndarray      # (g, 3) per group
+    normal_shade: np.ndarray    # (g, 3) float32 per group
+    normal_geo: np.ndarray      # (g, 3) float32 per group
     material: np.ndarray        # (g,)
-    area_exposed: np.ndarray    # (g,) merged area of exposed elements
-    vis_t: np.ndarray           # (d, e) uint8 visibility of occludable elements, direction-major
-    area_occluded: np.ndarray   # (e,) float32
-    starts: np.ndarray          # (k,) reduceat starts of occludable elements per group
-    occluded_groups: np.ndarray  # (k,) group of each segment
+    area_exposed: np.ndarray    # (g,) float32 merged area of exposed elements
+    factors: np.ndarray         # (d, r) float32 visibility factors, direction-major (see _visibility_factors)
+    group_sum: object           # (g, r) sparse float32: sums factor-column products into groups
     n_elements: int
+    n_occludable: int           # occludable elements before factorisation
     n_rays: int
     material_blocks: tuple      # (material, first group, end group) per material
 
@@ -183,7 +184,8 @@ class SceneCache:
             scenes = [scene]
         directions = cube_grid_directions(grid_size)
         steps = np.array([_normal_step_rad(b, normal_step_deg) for b in scene.brdfs])
-        poses = tuple(_build_pose(s, directions, element_size_m, steps, progress) for s in scenes)
+        tolerance = accuracy_mag / 1.0857 / 10.0
+        poses = tuple(_build_pose(s, directions, element_size_m, steps, tolerance, progress) for s in scenes)
         return cls(scene, poses, parameter, values, grid_size, float(element_size_m),
                    float(np.degrees(steps.min())), sun_samples, time.perf_counter() - start)
 
@@ -225,32 +227,33 @@ class SceneCache:
 
     def _pose_intensity(self, pose, sun, obs):
         m = len(sun)
-        weight = np.broadcast_to(pose.area_exposed, (m, len(pose.area_exposed))).copy()
-        if pose.vis_t.shape[1]:
-            idx_s, w_s = cube_grid_weights(sun, self.grid_size)
-            idx_o, w_o = cube_grid_weights(obs, self.grid_size)
-            product = _interpolate(pose.vis_t, idx_s, w_s) * _interpolate(pose.vis_t, idx_o, w_o)
-            product *= pose.area_occluded
-            weight[:, pose.occluded_groups] += np.add.reduceat(product, pose.starts, axis=1)
-        cos_geo_o = obs @ pose.normal_geo.T
-        cos_geo_s = sun @ pose.normal_geo.T
-        gate = np.where((cos_geo_o > 0.0) & (cos_geo_s > 0.0), cos_geo_o, 0.0) * weight
+        sun32, obs32 = sun.astype(np.float32), obs.astype(np.float32)
+        weight = np.repeat(pose.area_exposed[None, :], m, axis=0)
+        if pose.factors.shape[1]:
+            product = _interpolation_matrix(sun, self.grid_size, len(pose.factors)) @ pose.factors
+            product *= _interpolation_matrix(obs, self.grid_size, len(pose.factors)) @ pose.factors
+            weight += (pose.group_sum @ product.T).T
+        cos_geo_o = obs32 @ pose.normal_geo.T
+        cos_geo_s = sun32 @ pose.normal_geo.T
+        weight *= np.where((cos_geo_o > 0.0) & (cos_geo_s > 0.0), cos_geo_o, np.float32(0.0))
         total = np.zeros(m)
-        # Groups are sorted by material: one dense BRDF evaluation per material block.
+        # Groups are sorted by material: one BRDF evaluation per material block, on (frames,
+        # groups) arrays of cosines from matrix products.
         for material, begin, end in pose.material_blocks:
-            block = gate[:, begin:end]
+            block = weight[:, begin:end]
             rows = np.flatnonzero(block.any(axis=1))
             if len(rows) == 0:
                 continue
-            normal = np.broadcast_to(pose.normal_shade[begin:end], (len(rows), end - begin, 3)).reshape(-1, 3)
-            wo = np.repeat(obs[rows], end - begin, axis=0)
-            shading = np.zeros(len(normal))
+            normal_t = pose.normal_shade[begin:end].T
+            cos_o = obs32[rows] @ normal_t
             disk, disk_weights = sun_disk_directions(sun[rows], self.sun_samples[material])
-            for sun_dir, disk_weight in zip(disk, disk_weights):
-                wi = np.repeat(sun_dir, end - begin, axis=0)
-                cos_s = np.maximum(np.einsum("ij,ij->i", normal, wi), 0.0)
-                shading += disk_weight * self.scene.brdfs[material](wi, wo, normal) * cos_s
-            total[rows] += (block[rows] * shading.reshape(len(rows), end - begin)).sum(axis=1)
+            shading = np.zeros((len(rows), end - begin), dtype=np.float32)
+            for sun_dir, disk_weight in zip(disk.astype(np.float32), disk_weights):
+                cos_s = sun_dir @ normal_t
+                cos_so = np.einsum("ij,ij->i", sun_dir, obs32[rows])[:, None]
+                shading += (np.float32(disk_weight) * self.scene.brdfs[material].shade(cos_s, cos_o, cos_so)
+                            * np.maximum(cos_s, np.float32(0.0)))
+            total[rows] += np.einsum("ij,ij->i", block[rows], shading, dtype=np.float64)
         return total
 
     @property
@@ -261,7 +264,7 @@ class SceneCache:
     @property
     def nbytes(self) -> int:
         """Memory held by the visibility tables and element arrays."""
-        return int(sum(p.vis_t.nbytes + p.normal_shade.nbytes * 2 + p.area_occluded.nbytes for p in self.poses))
+        return int(sum(p.factors.nbytes + p.normal_shade.nbytes * 2 + p.area_exposed.nbytes for p in self.poses))
 
 
 def _exposed_sides(vertices, corners, normals, tolerance):
@@ -290,13 +293,14 @@ def _exposed_sides(vertices, corners, normals, tolerance):
     return exposed
 
 
-def _interpolate(table, index, weight):
-    """Bilinear interpolation of the (d, e) uint8 ``table`` at (m, 4) corners: (m, e) float32."""
-    weight = weight.astype(np.float32)
-    result = table[index[:, 0]] * weight[:, 0, None]
-    for corner in range(1, 4):
-        result += table[index[:, corner]] * weight[:, corner, None]
-    return result
+def _interpolation_matrix(directions, grid_size, n_directions):
+    """Bilinear interpolation on the cube map as a sparse (m, d) float32 matrix (4 entries a row)."""
+    from scipy import sparse
+
+    index, weight = cube_grid_weights(directions, grid_size)
+    m = len(directions)
+    return sparse.csr_matrix((weight.astype(np.float32).reshape(-1), index.reshape(-1), np.arange(0, 4 * m + 1, 4)),
+                             shape=(m, n_directions))
 
 
 def _normal_step_rad(brdf, normal_step_deg):
@@ -310,7 +314,7 @@ def _normal_step_rad(brdf, normal_step_deg):
     return math.radians(float(np.clip(math.degrees(brdf.lobe_width_rad) / 2.0, 0.5, 3.0)))
 
 
-def _build_pose(scene, directions, element_size_m, normal_step_rad, progress):
+def _build_pose(scene, directions, element_size_m, normal_step_rad, factor_tolerance, progress):
     mesh = scene.posed()
     corners, n_geo = mesh.corners_m, mesh.face_normals
     vertices = np.unique(np.round(mesh.vertices_m, 9), axis=0)
@@ -388,14 +392,64 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, progress):
     np.add.at(area_exposed, group[exposed_mask], weight_area[exposed_mask])
     order = np.argsort(group[occl], kind="stable")
     occl_sorted = occl[order]
-    visibility = np.ascontiguousarray(visibility[:, order])
+    visibility = visibility[:, order]
     occl_groups_all = group[occl_sorted]
     starts = np.flatnonzero(np.r_[True, np.diff(occl_groups_all) != 0]) if len(occl_sorted) else np.zeros(0, int)
+    factors, factor_starts = _visibility_factors(visibility, weight_area[occl_sorted], starts, factor_tolerance)
     bounds = np.flatnonzero(np.r_[True, np.diff(material) != 0, True])
     blocks = tuple((int(material[a]), int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:]))
-    return _Pose(normal_shade, normal_geo, material, area_exposed, visibility,
-                 weight_area[occl_sorted].astype(np.float32), starts, occl_groups_all[starts],
-                 n_groups + len(occl_sorted), n_rays, blocks)
+    from scipy import sparse
+
+    column_group = np.repeat(occl_groups_all[starts], np.diff(np.r_[factor_starts, factors.shape[1]]))
+    group_sum = sparse.csr_matrix((np.ones(len(column_group), dtype=np.float32),
+                                   (column_group, np.arange(len(column_group)))), shape=(n_groups, len(column_group)))
+    return _Pose(normal_shade.astype(np.float32), normal_geo.astype(np.float32), material,
+                 area_exposed.astype(np.float32), factors, group_sum,
+                 n_groups + len(occl_sorted), len(occl_sorted), n_rays, blocks)
+
+
+def _visibility_factors(visibility, area, starts, tolerance):
+    """Compress each group's visibility into a few columns whose products give its lit-and-seen area.
+
+    For a group (elements sharing material and normals) the run time needs only
+    ``W(s, o) = sum_e A_e V_e(s) V_e(o) = M(s) . M(o)`` with ``M = V diag(sqrt(A))`` (d, e).
+    With ``M^T M = Q L Q^T`` and ``P = M Q`` (columns by falling eigenvalue),
+    ``M(s) . M(o) = P(s) . P(o)`` exactly; keeping the first r columns leaves the error
+    ``R(s) . R(o)`` with ``|R(s)|^2`` the sum of the dropped ``P(s)**2``. r is the smallest
+    count with ``max_s |R(s)|^2 <= tolerance * sum(A)`` over the grid directions (bilinear
+    interpolation mixes rows convexly, so the bound holds between them too): the group's
+    W is then off by at most ``tolerance`` of its area. Flat panels whose shadows are a few
+    moving edges need tens of columns instead of thousands of elements.
+
+    Parameters
+    ----------
+    visibility : (d, e) uint8, occludable elements sorted by group.
+    area : (e,) float, element areas.
+    starts : (k,) int, first element of each group.
+    tolerance : float, largest error of W as a fraction of the group's area.
+
+    Returns
+    -------
+    factors : (d, r) float32, starts : (k,) int, first factor column of each group.
+    """
+    ends = np.r_[starts[1:], visibility.shape[1]].astype(int)
+    columns, new_starts, count = [], [], 0
+    for begin, end in zip(starts, ends):
+        block = visibility[:, begin:end].astype(np.float64) * np.sqrt(area[begin:end])
+        if end - begin > _FACTOR_MIN_ELEMENTS:
+            eigenvalues, vectors = np.linalg.eigh(block.T @ block)
+            projected = block @ np.ascontiguousarray(vectors[:, ::-1])
+            # tail[:, r] = |R(s)|^2 when the first r columns are kept.
+            tail = np.cumsum((projected ** 2)[:, ::-1], axis=1)[:, ::-1]
+            worst = np.r_[tail.max(axis=0), 0.0]
+            keep = int(np.argmax(worst <= tolerance * area[begin:end].sum()))
+            block = projected[:, :max(keep, 1)]
+        new_starts.append(count)
+        columns.append(block.astype(np.float32))
+        count += block.shape[1]
+    if not columns:
+        return np.zeros((visibility.shape[0], 0), dtype=np.float32), np.zeros(0, int)
+    return np.ascontiguousarray(np.concatenate(columns, axis=1)), np.asarray(new_starts)
 
 
 def _visibility(mesh, points, normals, directions, progress):

@@ -5,6 +5,9 @@ with spacing ``pixel_size_m`` covers the mesh's footprint seen from ``o``. Every
 
     f_r(s, o, n_s) * max(n_s . s, 0) * [n_g . s > 0] * V(x, s) * pixel_size_m**2
 
+(f_r as :meth:`raycast.brdf.BRDF.shade` applies it: diffuse terms do not test ``o`` against
+the shading normal; the hit itself proves the observer sees the face)
+
 where ``n_g`` is the geometric normal of the hit triangle turned toward the observer (surfaces
 are two-sided), ``n_s`` the shading normal interpolated from the corner normals at the hit's
 barycentric coordinates (turned to ``n_g``'s side) and ``V`` the Sun visibility from a shadow
@@ -286,9 +289,11 @@ class DirectRenderer:
             idx = lit[lit_materials == material]
             normal, wo_m = n_shade[idx], wo[idx]
             disk, weights = sun_disk_directions(wi_all[idx], self._state["sun_samples"][material])
+            cos_o = np.einsum("ij,ij->i", normal, wo_m)
             for wi, weight in zip(disk, weights):
-                cos_shade = np.maximum(np.einsum("ij,ij->i", normal, wi), 0.0)
-                total[idx] += weight * mesh.brdfs[material](wi, wo_m, normal) * cos_shade
+                cos_i = np.einsum("ij,ij->i", normal, wi)
+                value = mesh.brdfs[material].shade(cos_i, cos_o, np.einsum("ij,ij->i", wi, wo_m))
+                total[idx] += weight * value * np.maximum(cos_i, 0.0)
         return total
 
     def image(self, sun_body, obs_body):

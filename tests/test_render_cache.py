@@ -40,10 +40,10 @@ def test_cube_grid_interpolation():
 
 def test_convex_scene_needs_no_visibility():
     convex = SceneCache.build(Scene.from_parts([Part.box("box", (1, 2, 3), "m")], {"m": Lambertian(0.5)}))
-    assert convex.poses[0].vis_t.shape[1] == 0
+    assert convex.poses[0].factors.shape[1] == 0
     assert convex.n_elements == 6  # one merged element per face
     concave = SceneCache.build(topex.build(), grid_size=8)
-    assert concave.poses[0].vis_t.shape[1] > 0
+    assert concave.poses[0].factors.shape[1] > 0
 
 
 @pytest.mark.slow
