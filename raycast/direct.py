@@ -169,15 +169,22 @@ class DirectRenderer:
         spread = lit[np.linspace(0, len(lit) - 1, n_pilot - len(brightest)).astype(int)]
         pilot = np.unique(np.concatenate([brightest, spread]))
         previous = cls(scene, pixel, sun_samples, accuracy_mag).intensity(sun_body[pilot], obs_body[pilot])
+        change = math.inf
         while True:
             pixel /= 2.0
             if (footprint / pixel) ** 2 > max_pixels_per_frame:
+                reached = f"{change:.3g} mag" if math.isfinite(change) else "a change in which frames are lit"
+                relax = f"relax accuracy_mag to at least {max(change, accuracy_mag):.2g}" if math.isfinite(change) \
+                    else "relax accuracy_mag"
                 raise ValueError(
-                    f"accuracy_mag={accuracy_mag} needs rays finer than {2 * pixel:.3g} m "
-                    f"(more than max_pixels_per_frame={max_pixels_per_frame}) for {scene.name}: a glint or "
-                    "shadow edge is narrower than the sampling; relax accuracy_mag or raise max_pixels_per_frame")
+                    f"accuracy_mag={accuracy_mag} is out of reach for {scene.name} within max_pixels_per_frame="
+                    f"{max_pixels_per_frame}: at {2 * pixel:.3g} m pixels two successive pixel sizes still differ by "
+                    f"{reached} (a glint or shadow edge narrower than the sampling); {relax}, raise "
+                    f"max_pixels_per_frame to at least "
+                    f"{math.ceil((footprint / pixel) ** 2)} for one more halving, or give pixel_size_m directly")
             current = cls(scene, pixel, sun_samples, accuracy_mag).intensity(sun_body[pilot], obs_body[pilot])
             both = (current > 0.0) & (previous > 0.0)
+            change = math.inf
             if np.array_equal(current > 0.0, previous > 0.0):
                 change = np.abs(2.5 * np.log10(current[both] / previous[both])).max() if both.any() else 0.0
                 if change < accuracy_mag:

@@ -170,5 +170,8 @@ def test_accuracy_out_of_reach_is_a_clear_error():
     scene = Scene.from_parts([Part.cylinder("tube", 1.0, 4.0, "gloss", segments=16)], {"gloss": GGX(0.5, 0.05)})
     sun = unit(np.array([[1.0, 0.2, 0.1]]))
     obs = unit(np.array([[0.3, 1.0, 0.1]]))
-    with pytest.raises(ValueError, match="narrower than the sampling; relax accuracy_mag or raise max_pixels_per_frame"):
+    with pytest.raises(ValueError, match=r"accuracy_mag=0.0001 is out of reach for .* within max_pixels_per_frame=200000: "
+                       r"at [0-9.e-]+ m pixels two successive pixel sizes still differ by [0-9.e-]+ mag .*relax "
+                       r"accuracy_mag to at least [0-9.e-]+, raise max_pixels_per_frame to at least [0-9]+ for one "
+                       r"more halving, or give pixel_size_m directly"):
         DirectRenderer.from_accuracy(scene, sun, obs, accuracy_mag=1e-4, max_pixels_per_frame=200_000)
