@@ -48,6 +48,8 @@ _MAX_RAYS_PER_BATCH = 2_000_000
 _MAX_LEVEL = 16
 # Groups of at most this many occludable elements keep their visibility columns as they are.
 _FACTOR_MIN_ELEMENTS = 4
+# Normals are grouped in bins of the material's normal step divided by this.
+_MERGE_FRACTION = 3.0
 
 
 def cube_grid_directions(grid_size):
@@ -356,7 +358,9 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, factor_toler
     visibility = np.zeros((len(directions), len(occl)), dtype=np.uint8)
     n_rays = 0
     if len(occl):
-        visibility, n_rays = _visibility(mesh, el["point"][occl], el["geo"][occl], directions, progress)
+        # Two grid spacings: every node a grazing direction interpolates from.
+        band = math.sin(2.0 * _grid_spacing_rad(directions))
+        visibility, n_rays = _visibility(mesh, el["point"][occl], el["geo"][occl], directions, progress, band)
         upper = (el["geo"][occl] @ directions.T).T > 0.0
         seen = (visibility.astype(bool) & upper).any(axis=0)
         blocked = (~visibility.astype(bool) & upper).any(axis=0)
@@ -371,10 +375,13 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, factor_toler
         # Re-index the occludable elements after dropping.
         new_index = np.cumsum(keep_mask) - 1
         occl = new_index[occl_kept]
-    # Group elements by material, geometric normal and (quantised) shading normal.
-    quantum = 1e-3
+    # Group elements by material and by geometric and shading normals quantised to a third of
+    # the material's normal step: elements of one group are shaded with their area-weighted
+    # mean normal (an error second order in the bin, like the normal's spread within an
+    # element), and their visibility columns are factorised together (_visibility_factors).
+    quantum = (normal_step_rad / _MERGE_FRACTION)[el["material"]][:, None]
     # Material first in the key, so np.unique sorts the groups into one block per material.
-    key = np.column_stack([el["material"], np.round(el["geo"] / 1e-6), np.round(el["normal"] / quantum)]).astype(np.int64)
+    key = np.column_stack([el["material"], np.round(el["geo"] / quantum), np.round(el["normal"] / quantum)]).astype(np.int64)
     _, group, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
     group = group.reshape(-1)
     n_groups = len(counts)
@@ -383,7 +390,8 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, factor_toler
     np.add.at(normal_shade, group, el["normal"] * weight_area[:, None])
     normal_shade /= np.linalg.norm(normal_shade, axis=1, keepdims=True)
     normal_geo = np.zeros((n_groups, 3))
-    normal_geo[group] = el["geo"]
+    np.add.at(normal_geo, group, el["geo"] * weight_area[:, None])
+    normal_geo /= np.linalg.norm(normal_geo, axis=1, keepdims=True)
     material = np.zeros(n_groups, dtype=np.int64)
     material[group] = el["material"]
     area_exposed = np.zeros(n_groups)
@@ -406,6 +414,12 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, factor_toler
     return _Pose(normal_shade.astype(np.float32), normal_geo.astype(np.float32), material,
                  area_exposed.astype(np.float32), factors, group_sum,
                  n_groups + len(occl_sorted), len(occl_sorted), n_rays, blocks)
+
+
+def _grid_spacing_rad(directions):
+    """The cube map's largest spacing between neighbouring directions (at the face centres)."""
+    n = round(math.sqrt(len(directions) / 6.0)) - 1
+    return math.pi / 2.0 / n
 
 
 def _visibility_factors(visibility, area, starts, tolerance):
@@ -452,17 +466,19 @@ def _visibility_factors(visibility, area, starts, tolerance):
     return np.ascontiguousarray(np.concatenate(columns, axis=1)), np.asarray(new_starts)
 
 
-def _visibility(mesh, points, normals, directions, progress):
+def _visibility(mesh, points, normals, directions, progress, horizon_band):
     """(d, e) uint8: 1 where the ray from element e toward direction d escapes the mesh.
 
-    Directions below an element's plane are not cast and set to 1, so that interpolation near
-    the horizon is not dragged down by the surface itself (the cosine gate removes them).
+    Directions within ``horizon_band`` (a sine) below an element's plane take the visibility
+    of their mirror image above it, so that bilinear interpolation toward a grazing Sun or
+    observer continues the visibility just above the horizon (a face grazed by the Sun along a
+    stepped tube is shadowed by the steps; filling the band with 1 would light it). Directions
+    further below are not cast and set to 1: the cosine gate removes them.
     """
     raycaster = _open3d_scene(mesh)
     offset = 1e-4 * max(mesh.radius_m, 1.0)
     origins = (points + offset * normals).astype(np.float32)
     visibility = np.ones((len(directions), len(points)), dtype=np.uint8)
-    directions32 = directions.astype(np.float32)
     chunk = max(1, _MAX_RAYS_PER_BATCH // len(directions))
     bar = None
     if progress:
@@ -471,9 +487,13 @@ def _visibility(mesh, points, normals, directions, progress):
     total = 0
     for begin in range(0, len(points), chunk):
         elements = np.arange(begin, min(begin + chunk, len(points)))
-        d_idx, e_local = np.nonzero(directions @ normals[elements].T > 0.0)
+        height = directions @ normals[elements].T
+        d_idx, e_local = np.nonzero(height > -horizon_band)
         e_idx = elements[e_local]
-        rays = np.concatenate([origins[e_idx], directions32[d_idx]], axis=1)
+        below = np.minimum(height[d_idx, e_local], 0.0)
+        cast = directions[d_idx] - 2.0 * below[:, None] * normals[e_idx]
+        cast /= np.linalg.norm(cast, axis=1, keepdims=True)
+        rays = np.concatenate([origins[e_idx], cast.astype(np.float32)], axis=1)
         blocked = raycaster.test_occlusions(rays).numpy()
         visibility[d_idx[blocked], e_idx[blocked]] = 0
         total += len(d_idx)
