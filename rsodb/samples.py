@@ -1,22 +1,31 @@
-"""Generate `data_samples/`: small observation files in the real formats with known truth.
+"""Generate `data_samples/`: observation files in the real formats, rendered from known spin states.
 
 Each sample is a pass of a real satellite (public TLEs from the reference paper's code,
 Apache-2.0) over Derenivka, found by searching +-20 days around the TLE epoch for a sunlit
-satellite above 20 deg with the Sun below -6 deg (the nearest such passes are used). Geometry comes from skyfield (SGP4, offline
-DE421 and timescale via `raycast.ephemeris`), with the elevation refracted as PyEphem does,
-like the lab's files. Brightness is a simple periodic model of the range-normalised standard
-magnitude,
+satellite above 20 deg with the Sun below -6 deg (the nearest such passes are used). The
+light curve is rendered by the project's own renderer along that pass's geometry, from a spin
+state written down in `SAMPLES`:
 
-    m_st(t) = m0 + a1 cos(2 pi t / P + phi1) + a2 cos(4 pi t / P + phi2) - g exp(-d^2 / (2 w^2)),
+- geometry: `raycast.geometry.PassGeometry.compute` (SGP4, Sun, Earth shadow, exposure
+  sub-samples) for the site the file declares;
+- attitude: the published precessing spin (`raycast.attitude.PrecessingSpin`), its phases
+  given at the pass mid-time exactly as the fitter defines them (`rsodb.fit.model.EpochShifted`),
+  so a fit of the file with the ``precessing`` attitude family recovers the numbers in
+  ``truth.json``;
+- shape: the models built by code, `raycast.models.topex` (NORAD 22076, solar-array pitch
+  from the truth) and `raycast.models.cosmos2502` (NORAD 40358);
+- brightness: the fast path (`raycast.cache.SceneCache` through `raycast.render.render`), and
+  magnitudes reduced to 1000 km (`raycast.photometry`) in the file's band(s).
 
-(d: distance in phase cycles to a glint at phase phi_g), turned into counts through the
-inverse of each format's reduction law with Poisson-like noise, and written back as the
-format's magnitudes, including ccd_phot's historical ``+kX`` sign error for passes before
-2024-08-01. The injected periods and reduction constants go to ``README.md`` and
-``truth.json`` beside the files, so tests can check what later stages recover.
+The rendered standard magnitudes are turned into counts through the inverse of each format's
+reduction law with Poisson-like noise, and written back as the format's magnitudes, including
+ccd_phot's historical ``+kX`` sign error for passes before 2024-08-01. The truths, the
+apparent period of each noiseless curve (what a period search should find) and the reduction
+constants go to ``README.md`` and ``truth.json`` beside the files, so tests can check what later
+stages recover.
 
 Run ``python -m rsodb.samples --out data_samples [--seed N]``; the output is byte-for-byte
-deterministic for a given seed. The ray-cast renderer will replace the brightness model.
+deterministic for a given seed (the seed drives the noise and the dropped rows only).
 """
 from __future__ import annotations
 
@@ -29,14 +38,15 @@ import sys
 
 import numpy as np
 
-from ingest.elements import parse_tle, tle_cospar, tle_norad
+from ingest.elements import parse_tle, tle_cospar
 from ingest.observation import Pass
 from ingest.reduction import airmass, instrumental_mag, range_correction_mag
 from ingest.times import NS_PER_DAY
 from ingest.writers import write_ccd_phot, write_phc
 from raycast.site import DERENIVKA, UZHHOROD, Site
 
-__all__ = ["SampleSpec", "SAMPLES", "TLES", "generate", "model_mag", "main"]
+__all__ = ["SpinTruth", "SampleSpec", "SAMPLES", "TLES", "SHAPES", "CACHE_GRID_SIZE", "generate", "render_mag",
+           "main"]
 
 # Public TLEs used by the reference paper's code (vkudak/blender_lc_fit, Apache-2.0).
 TLES = {
@@ -47,11 +57,21 @@ TLES = {
             "1 40358U 14086A   24009.55814244  .00000043  00000-0  83941-4 0  9993",
             "2 40358  67.1523  12.8839 0007020 252.7955 107.2362 13.97588796459621"),
 }
+# The model each object is rendered with (a module of raycast.models with a build() function).
+SHAPES = {22076: "topex", 40358: "cosmos2502"}
+# Visibility grid of the renderer's cache. The fitter's cache uses 32 (directions 2.8 deg apart);
+# 16 builds ~4x faster and changes the light curves by far less than their noise, and data
+# rendered with exactly the fitter's model would flatter it.
+CACHE_GRID_SIZE = 16
+CACHE_ACCURACY_MAG = 0.01
+# Exposure sub-samples: this many times the fitter's default (2 deg of spin each), so that the
+# solar cells' 1.3 deg glints are integrated over the exposure rather than stepped over.
+_GLINT_SUBSAMPLING = 3
 # ccd_phot added +kX instead of -kX until this date (PROVENANCE.md).
 SIGN_FIX_DATE = np.datetime64("2024-08-01", "ns")
 # Counting noise: sigma_F^2 = F + sky variance (counts^2), close to the real files' Flux_err.
 SKY_VARIANCE_COUNTS2 = 1000.0
-# A frame is saturated above this many counts (the glints reach it).
+# A frame is saturated above this many counts (the brightest glints can reach it).
 SATURATION_COUNTS = 2.0e5
 _MIN_ELEVATION_DEG = 20.0
 _MAX_SUN_ELEVATION_DEG = -6.0
@@ -60,8 +80,49 @@ _SEARCH_DAYS = 20
 
 
 @dataclass(frozen=True)
+class SpinTruth:
+    """The spin state a sample is rendered from: the fitter's ``precessing`` attitude family.
+
+    Attributes
+    ----------
+    spin_period_s : float
+        Spin period about `spin_axis`, relative to the precessing frame, s.
+    spin_phase_deg : float
+        Spin phase at the pass mid-time (midway between the first and last samples).
+    precession_period_s : float
+        Period of the spin axis around nadir, s.
+    precession_phase_deg : float
+        Precession phase at the pass mid-time.
+    precession_angle_deg : float
+        Half-angle of the precession cone about nadir.
+    spin_axis : str
+        Body axis that spins (TOPEX about its long axis ``"z"``, COSMOS 2502 end over end ``"x"``).
+    panel_pitch_deg : float or None
+        Solar-array pitch of a model that has one (TOPEX), else None.
+    """
+
+    spin_period_s: float
+    spin_phase_deg: float
+    precession_period_s: float
+    precession_phase_deg: float
+    precession_angle_deg: float
+    spin_axis: str = "z"
+    panel_pitch_deg: float | None = None
+
+    def attitude(self, epoch_s: float):
+        """The `raycast.attitude.PrecessingSpin` with its phases at `epoch_s` (s after the first sample)."""
+        from raycast.attitude import PrecessingSpin
+        from rsodb.fit.model import EpochShifted
+
+        return EpochShifted(PrecessingSpin(
+            period_s=self.spin_period_s, phase_deg=self.spin_phase_deg,
+            precession_period_s=self.precession_period_s, precession_phase_deg=self.precession_phase_deg,
+            precession_angle_deg=self.precession_angle_deg, spin_axis=self.spin_axis), epoch_s)
+
+
+@dataclass(frozen=True)
 class SampleSpec:
-    """One sample file and the truth it is generated from.
+    """One sample file and the truth it is rendered from.
 
     Attributes
     ----------
@@ -79,14 +140,10 @@ class SampleSpec:
         Exposure (sample) time, s.
     n_samples : int
         Samples before any are dropped (phc files lose a few, as real ones do).
-    period_s : float
-        Injected spin period P.
-    mean_mag, amplitude1_mag, amplitude2_mag, glint_mag, glint_width_cycles : float
-        m0, a1, a2, g and w of the brightness model.
+    truth : SpinTruth
+        The spin state.
     zero_point_mag, extinction_mag : float
-        A and k (> 0) of the format's reduction law (V values for phc; B = V + colour).
-    colour_bv_mag : float
-        B - V added to the model for phc files.
+        A and k (> 0) of the format's reduction law (V values for phc).
     """
 
     file_format: str
@@ -96,24 +153,26 @@ class SampleSpec:
     pass_index: int
     exposure_s: float
     n_samples: int
-    period_s: float
-    mean_mag: float
-    amplitude1_mag: float
-    amplitude2_mag: float
-    glint_mag: float
-    glint_width_cycles: float
+    truth: SpinTruth
     zero_point_mag: float
     extinction_mag: float
-    colour_bv_mag: float = 0.0
 
 
-# TOPEX: spin 9.86 s (the paper's 2020 value); COSMOS 2502: 40.5 s (paper, 2023).
+# TOPEX: spin 9.86 s (the paper's 2020 value), array pitch 12 deg (the paper's fit), spinning
+# about its long axis; COSMOS 2502: 40.5 s (paper, 2023), end over end. Slow precession (about an
+# hour) turns the light curves' shape over a pass and keeps the apparent periods within a few
+# percent of the spin periods. The truths and passes are chosen so that the light curve repeats
+# once per spin rather than twice (a period search then finds the spin period, not half of it).
+# The COSMOS 2502 ccd_phot and phc files are the same pass seen from Derenivka and Uzhhorod, with
+# one spin state (its phases referred to each file's own mid-time).
+_TOPEX_MAY = SpinTruth(9.86, 40.0, 4000.0, 120.0, 20.0, "z", 12.0)
+_TOPEX_JUNE = SpinTruth(9.87, 210.0, 4000.0, 300.0, 20.0, "z", 12.0)
+_COSMOS = SpinTruth(40.5, 75.0, 4000.0, 60.0, 45.0, "x")
 SAMPLES = (
-    SampleSpec("ccd_phot", 22076, "V", "ut", 0, 0.2, 1100, 9.86, 5.2, 0.45, 0.25, 1.6, 0.015, 19.4, 0.10),
-    SampleSpec("ccd_phot", 22076, "R", "jd", 1, 0.25, 900, 9.87, 4.8, 0.40, 0.20, 1.4, 0.015, 19.0, 0.08),
-    SampleSpec("ccd_phot", 40358, "V", "ut", 0, 0.5, 600, 40.5, 8.0, 0.50, 0.30, 1.2, 0.01, 21.4, 0.40),
-    SampleSpec("ccd_phot", 40358, "B", "jd", 0, 0.5, 440, 40.6, 7.1, 0.50, 0.30, 1.2, 0.01, 20.5, 0.20),
-    SampleSpec("phc", 40358, "BV", "", 1, 1.0, 300, 40.5, 5.4, 0.50, 0.30, 1.0, 0.01, 14.04, 0.45, 0.7),
+    SampleSpec("ccd_phot", 22076, "V", "ut", 2, 0.2, 600, _TOPEX_MAY, 18.0, 0.10),
+    SampleSpec("ccd_phot", 22076, "R", "jd", 1, 0.25, 480, _TOPEX_JUNE, 17.5, 0.08),
+    SampleSpec("ccd_phot", 40358, "V", "ut", 0, 1.0, 420, _COSMOS, 13.8, 0.40),
+    SampleSpec("phc", 40358, "BV", "", 0, 1.0, 420, _COSMOS, 14.04, 0.45),
 )
 # phc B-band reduction constants (the real phc file's B law: A = 14.42, k = 0.65).
 _PHC_B = (14.42, 0.65)
@@ -127,7 +186,7 @@ def generate(out_dir: str | Path, seed: int = 1) -> list[Path]:
     out_dir : str or Path
         Created when missing; existing sample files are overwritten.
     seed : int
-        Seeds the noise, phases and dropped rows (one child stream per sample).
+        Seeds the noise and the dropped rows (one child stream per sample).
 
     Returns
     -------
@@ -143,9 +202,77 @@ def generate(out_dir: str | Path, seed: int = 1) -> list[Path]:
         path, record = _write_sample(spec, out_dir, rng)
         written.append(path)
         truth.append(record)
-    (out_dir / "truth.json").write_text(json.dumps({"seed": seed, "files": truth}, indent=1) + "\n")
+    (out_dir / "truth.json").write_text(json.dumps({"seed": seed, "command": _command(seed), "noise": _NOISE,
+                                                    "files": truth}, indent=1) + "\n")
     (out_dir / "README.md").write_text(_readme(truth, seed))
     return written
+
+
+def _command(seed: int) -> str:
+    return f"python -m rsodb.samples --out data_samples --seed {seed}"
+
+
+_NOISE = (f"counts F from the rendered magnitude through the inverse reduction law; Gaussian noise of variance "
+          f"F + {SKY_VARIANCE_COUNTS2:g} counts^2 (ccd_phot) or F + 2 sky (phc, sky = 400 counts); "
+          f"frames above {SATURATION_COUNTS:g} counts flagged saturated")
+
+
+def render_mag(spec: SampleSpec, time_utc: np.ndarray, site: Site, bands: tuple[str, ...]) -> dict[str, np.ndarray]:
+    """Noiseless standard magnitudes (reduced to 1000 km) of a sample, rendered along its pass.
+
+    Parameters
+    ----------
+    spec : SampleSpec
+    time_utc : (n,) datetime64[ns]
+        Mid-exposure times.
+    site : Site
+        The observer the file declares.
+    bands : tuple of str
+        Bands to return (the Sun's colour makes B - V = 0.63 for grey materials).
+
+    Returns
+    -------
+    dict of str to (n,) float
+    """
+    from raycast.geometry import PassGeometry, choose_n_sub
+    from raycast.orbit import Satellite
+    from raycast.render import render
+
+    truth = spec.truth
+    n_sub = _GLINT_SUBSAMPLING * choose_n_sub(spec.exposure_s, truth.spin_period_s)
+    geometry = PassGeometry.compute(Satellite.from_tle(list(TLES[spec.norad])), site, time_utc, spec.exposure_s,
+                                    n_sub=n_sub)
+    body = geometry.body_frame(truth.attitude(0.5 * (geometry.t_s[0] + geometry.t_s[-1])))
+    scene, cache = _scene_cache(SHAPES[spec.norad], truth.panel_pitch_deg)
+    light_curve = render(scene, body, method="cached", cache=cache)
+    if not np.all(light_curve.intensity_m2_sr > 0):
+        raise RuntimeError(f"the rendered {SHAPES[spec.norad]} is dark in some frames; choose another truth or pass")
+    from raycast.photometry import REFERENCE_RANGE_KM, magnitude
+
+    return {band: magnitude(light_curve.intensity_m2_sr, REFERENCE_RANGE_KM, band) for band in bands}
+
+
+@functools.lru_cache(maxsize=None)
+def _scene_cache(shape: str, panel_pitch_deg: float | None):
+    """The model's scene (articulation fixed) and its renderer cache, built once per process."""
+    import importlib
+
+    from raycast.cache import SceneCache
+
+    scene = importlib.import_module(f"raycast.models.{shape}").build()
+    if panel_pitch_deg is not None:
+        scene = scene.with_parameters(panel_pitch_deg=panel_pitch_deg)
+    return scene, SceneCache.build(scene, accuracy_mag=CACHE_ACCURACY_MAG, grid_size=CACHE_GRID_SIZE)
+
+
+def apparent_period_s(spec: SampleSpec, time_utc: np.ndarray, model_mag: np.ndarray) -> float:
+    """The period the project's period search finds on the noiseless curve (what noisy data should give)."""
+    from rsodb.lightcurve import LightCurve
+    from rsodb.periods import find_period
+
+    t_s = (time_utc - time_utc[0]) / np.timedelta64(1, "s")
+    lc = LightCurve(t_s=t_s, mag=model_mag, mag_err=np.full(len(t_s), 0.01), exposure_s=spec.exposure_s)
+    return float(find_period(lc).best_period_s)
 
 
 def _write_sample(spec: SampleSpec, out_dir: Path, rng: np.random.Generator) -> tuple[Path, dict]:
@@ -153,15 +280,12 @@ def _write_sample(spec: SampleSpec, out_dir: Path, rng: np.random.Generator) -> 
     time_utc = _pass_times(tle, DERENIVKA, spec)
     # The phc writer computed Az/El/Rg for Derenivka even at Uzhhorod: so do we.
     az_deg, el_deg, range_km = _topocentric(tle, DERENIVKA, time_utc)
-    phase0, phase2, glint_phase = rng.uniform(0, 1, 3)
-    t_s = (time_utc - time_utc[0]) / np.timedelta64(1, "s")
-    model = model_mag(spec, t_s, phase0, phase2, glint_phase)
     common = dict(norad=spec.norad, name=tle[0][2:], cospar=tle_cospar(tle), tle=tle, exposure_s=spec.exposure_s,
                   az_deg=az_deg, el_deg=el_deg, range_km=range_km)
-    record = {**asdict(spec), "phase1_cycles": round(float(phase0), 6), "phase2_cycles": round(float(phase2), 6),
-              "glint_phase_cycles": round(float(glint_phase), 6), "start_utc": str(time_utc[0])[:23]}
+    record = {**asdict(spec), "shape": SHAPES[spec.norad], "start_utc": str(time_utc[0])[:23]}
 
     if spec.file_format == "ccd_phot":
+        model = render_mag(spec, time_utc, DERENIVKA, (spec.band,))[spec.band]
         sign = 1.0 if time_utc[0] < SIGN_FIX_DATE else -1.0
         flux, flux_err, mag, mag_err = _measure(model, spec.exposure_s, el_deg, range_km, spec.zero_point_mag,
                                                 spec.extinction_mag, sign, rng)
@@ -171,18 +295,20 @@ def _write_sample(spec: SampleSpec, out_dir: Path, rng: np.random.Generator) -> 
         name = f"result_{spec.norad}_{stamp[:10].replace('-', '')}_UT{stamp[11:19].replace(':', '')}.ph{spec.band}"
         path = write_ccd_phot(pass_, out_dir / name, spec.variant)
         record.update(file=name, extinction_sign_in_file="+kX (pre-2024-08-01 sign error)" if sign > 0 else "-kX",
-                      n_rows=len(pass_), n_saturated=int(pass_.saturated.sum()))
+                      n_rows=len(pass_), n_saturated=int(pass_.saturated.sum()),
+                      apparent_period_s=_rounded_period(spec, time_utc, model), **_range_of(model))
         return path, record
 
     # phc: B and V on one time axis; a few samples lost, three with no signal (sentinel 10).
     keep = np.sort(rng.choice(len(time_utc), size=len(time_utc) - 8, replace=False))
-    keep[0] = 0
+    keep[0], keep[-1] = 0, len(time_utc) - 1
+    keep = np.unique(keep)
+    models = render_mag(spec, time_utc[keep], UZHHOROD, ("B", "V"))
     passes, sky = [], []
     lost = rng.integers(100, len(keep) - 100) + np.arange(3)
-    for band, colour, (zero_point, k) in (("B", spec.colour_bv_mag, _PHC_B),
-                                          ("V", 0.0, (spec.zero_point_mag, spec.extinction_mag))):
-        flux, flux_err, mag, mag_err = _measure(model[keep] + colour, spec.exposure_s, el_deg[keep],
-                                                range_km[keep], zero_point, k, -1.0, rng, sky_counts=400.0)
+    for band, (zero_point, k) in (("B", _PHC_B), ("V", (spec.zero_point_mag, spec.extinction_mag))):
+        flux, flux_err, mag, mag_err = _measure(models[band], spec.exposure_s, el_deg[keep], range_km[keep],
+                                                zero_point, k, -1.0, rng, sky_counts=400.0)
         valid = np.ones(len(keep), bool)
         valid[lost] = False
         flux = np.where(valid, flux, np.round(rng.normal(0.0, 5.0, len(keep)), 3))
@@ -195,8 +321,18 @@ def _write_sample(spec: SampleSpec, out_dir: Path, rng: np.random.Generator) -> 
     name = f"{spec.norad}_{stamp[2:10].replace('-', '')}_{stamp[11:16].replace(':', '')}.phc"
     path = write_phc(passes[0], passes[1], out_dir / name, sky_b=sky[0], sky_v=sky[1])
     record.update(file=name, extinction_sign_in_file="-kX", n_rows=len(keep), sentinel_rows=lost.tolist(),
-                  zero_point_b_mag=_PHC_B[0], extinction_b_mag=_PHC_B[1])
+                  zero_point_b_mag=_PHC_B[0], extinction_b_mag=_PHC_B[1],
+                  apparent_period_s=_rounded_period(spec, time_utc[keep], models["V"]), **_range_of(models["V"]))
     return path, record
+
+
+def _rounded_period(spec: SampleSpec, time_utc: np.ndarray, model_mag: np.ndarray) -> float:
+    return round(apparent_period_s(spec, time_utc, model_mag), 4)
+
+
+def _range_of(model_mag: np.ndarray) -> dict:
+    """The noiseless curve's brightest and faintest standard magnitudes (README and sanity checks)."""
+    return {"model_mag_min": round(float(model_mag.min()), 3), "model_mag_max": round(float(model_mag.max()), 3)}
 
 
 def _pass_times(tle: tuple[str, ...], site: Site, spec: SampleSpec) -> np.ndarray:
@@ -291,28 +427,6 @@ def _sun_elevation_deg(site: Site, time_utc: np.ndarray) -> np.ndarray:
     return alt.degrees
 
 
-def model_mag(spec: SampleSpec, t_s: np.ndarray, phase1: float, phase2: float, glint_phase: float) -> np.ndarray:
-    """The brightness model: range-normalised standard magnitude at `t_s` seconds after the first sample.
-
-    Parameters
-    ----------
-    spec : SampleSpec
-    t_s : (n,) float
-    phase1, phase2, glint_phase : float
-        Phases in cycles (``truth.json`` records them per file).
-
-    Returns
-    -------
-    (n,) float
-    """
-    cycles = t_s / spec.period_s
-    distance = (cycles - glint_phase + 0.5) % 1.0 - 0.5
-    return (spec.mean_mag
-            + spec.amplitude1_mag * np.cos(2 * np.pi * (cycles + phase1))
-            + spec.amplitude2_mag * np.cos(4 * np.pi * (cycles + phase2))
-            - spec.glint_mag * np.exp(-0.5 * (distance / spec.glint_width_cycles) ** 2))
-
-
 def _measure(model_mag, exposure_s, el_deg, range_km, zero_point, extinction, sign, rng, sky_counts=None):
     """Counts from the model through the inverse law, noise, and the magnitudes as the file writes them.
 
@@ -339,33 +453,50 @@ def _measure(model_mag, exposure_s, el_deg, range_km, zero_point, extinction, si
 
 def _readme(truth: list[dict], seed: int) -> str:
     rows = "\n".join(
-        f"| `{r['file']}` | {r['norad']} | {r['band']} | {r['file_format']}{' ' + r['variant'] if r['variant'] else ''} "
-        f"| {r['start_utc']} | {r['n_rows']} | {r['exposure_s']} | **{r['period_s']}** | {r['mean_mag']} "
+        f"| `{r['file']}` | {r['norad']} ({r['shape']}) | {r['band']} | {r['file_format']}"
+        f"{' ' + r['variant'] if r['variant'] else ''} | {r['start_utc']} | {r['n_rows']} | {r['exposure_s']} "
+        f"| **{r['truth']['spin_period_s']}** | {r['truth']['spin_phase_deg']:g} "
+        f"| {r['truth']['precession_period_s']:g} / {r['truth']['precession_phase_deg']:g} "
+        f"/ {r['truth']['precession_angle_deg']:g} | {r['truth']['spin_axis']} "
+        f"| {'-' if r['truth']['panel_pitch_deg'] is None else format(r['truth']['panel_pitch_deg'], 'g')} "
+        f"| {r['apparent_period_s']} | {r['model_mag_min']}..{r['model_mag_max']} "
         f"| {r['zero_point_mag']} / {r['extinction_mag']} | {r['extinction_sign_in_file']} |"
         for r in truth)
     return f"""# Sample observations (generated)
 
-Written by `python -m rsodb.samples --out data_samples --seed {seed}` (rsodb/samples.py); do not
-edit by hand. Every file is synthetic: real public TLEs and real site coordinates, a simple
-periodic brightness model, and the real file formats with their quirks. `truth.json` holds the
-same information, machine-readable.
+Written by `{_command(seed)}` (rsodb/samples.py); do not edit by hand. Every
+file is synthetic: real public TLEs and real site coordinates, light curves rendered by the
+project's renderer from known spin states, and the real file formats with their quirks.
+`truth.json` holds the same information, machine-readable.
 
-| file | NORAD | band | format | first sample (UTC, mid-exposure) | rows | dt (s) | injected period P (s) | m0 | A / k | extinction in file |
-|---|---|---|---|---|---|---|---|---|---|---|
+| file | NORAD (model) | band | format | first sample (UTC, mid-exposure) | rows | dt (s) | spin period P (s) | spin phase (deg) | precession period (s) / phase (deg) / angle (deg) | spin axis | panel pitch (deg) | apparent period (s) | m_st range (mag) | A / k | extinction in file |
+|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|
 {rows}
 
-Model: m_st(t) = m0 + a1 cos(2 pi (t/P + phi1)) + a2 cos(4 pi (t/P + phi2)) - g exp(-d^2 / 2w^2),
-d the distance in cycles to the glint phase (all values in `truth.json`); t from the first sample.
-m_st is the standard magnitude reduced to 1000 km. Counts follow from the inverse of the reduction
-law with noise sigma^2 = F + {SKY_VARIANCE_COUNTS2:g} (ccd_phot) or F + 2 Fon (phc); frames above
-{SATURATION_COUNTS:g} counts are marked saturated (`*`).
+How the light curves are made: the pass geometry (`raycast.geometry.PassGeometry`, SGP4,
+exposure sub-samples, Earth shadow) for the file's site, the published precessing spin
+(`raycast.attitude.PrecessingSpin`: spin about the body axis given, that axis precessing on a
+cone about nadir) with both phases given at the pass mid-time (midway between the first and
+last samples, the fitter's reference epoch), and the models built by code
+(`raycast.models.topex` with the solar-array pitch given, `raycast.models.cosmos2502`), rendered
+with the fast path (`raycast.cache.SceneCache`, visibility grid {CACHE_GRID_SIZE}) and reduced to
+1000 km (m_st). A fit with the `precessing` attitude family and the object's model recovers the
+spin state; the free magnitude offset of the fit absorbs the zero point.
+
+The apparent period is what the project's period search (`rsodb.periods.find_period`) finds on
+the noiseless curve: the light curve of a precessing body in an orbiting frame repeats at
+neither the spin period nor exactly any multiple of it, so this is the number a period search
+on the file should reproduce.
+
+Noise: {_NOISE}. m_st is the standard magnitude reduced to 1000 km; counts follow from the
+inverse of the file's reduction law.
 
 Quirks reproduced on purpose:
 - ccd_phot files before 2024-08-01 add +kX (the historical sign error); the reader flags them and
   recovers m_st in `mag_corrected`.
 - the 2021 TOPEX files predate 2023-02, so their stamps are exposure starts (mid - dt/2).
 - the phc file (Uzhhorod photometer, B and V) has Az/El/Rg computed for Derenivka, integration-start
-  stamps on whole seconds, 8 missing samples and 3 samples without signal (sentinel magnitude 10).
+  stamps on whole seconds, missing samples and 3 samples without signal (sentinel magnitude 10).
 """
 
 
@@ -373,11 +504,12 @@ def main(argv: list[str] | None = None) -> int:
     """Command line: ``python -m rsodb.samples --out data_samples [--seed N]``."""
     parser = argparse.ArgumentParser(
         prog="python -m rsodb.samples",
-        description="Generate the sample observation files (ccd_phot .phX and phc) with known injected periods.",
+        description="Generate the sample observation files (ccd_phot .phX and phc): light curves rendered from "
+                    "known spin states along real passes, written in the real formats.",
         epilog="example: python -m rsodb.samples --out data_samples --seed 1",
     )
     parser.add_argument("--out", required=True, type=Path, help="output directory (created when missing)")
-    parser.add_argument("--seed", type=int, default=1, help="seed of the noise and phases (default 1)")
+    parser.add_argument("--seed", type=int, default=1, help="seed of the noise and dropped rows (default 1)")
     args = parser.parse_args(argv)
     for path in generate(args.out, args.seed):
         print(path)
