@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from raycast.brdf import GGX, Lambertian, Principled, directional_albedo, fresnel_dielectric
+from tests.render_support import unit
 
 RNG = np.random.default_rng(20260730)
 
@@ -121,3 +122,26 @@ def test_principled_diffuse_weight_from_specular_albedo():
 def test_validation_messages(make, message):
     with pytest.raises(ValueError, match=message.replace("(", r"\(").replace(")", r"\)").replace("[", r"\[").replace("]", r"\]")):
         make()
+
+
+def test_shade_keeps_diffuse_light_below_the_shading_horizon():
+    # cos_o < 0: the observer is below the shading normal's horizon (a smooth-shaded face it
+    # still sees). The BRDF itself is 0 there; shade() keeps the view-independent diffuse terms
+    # exactly and cuts the specular lobes.
+    cos_i, cos_o, cos_io = np.array([0.8]), np.array([-0.1]), np.array([-0.2])
+    lambert = Lambertian(0.5)
+    assert lambert.from_cosines(cos_i, cos_o, cos_io)[0] == 0.0
+    assert lambert.shade(cos_i, cos_o, cos_io)[0] == pytest.approx(0.5 / np.pi, rel=1e-15)
+    assert GGX(0.5, 0.3).shade(cos_i, cos_o, cos_io)[0] == 0.0
+    principled = Principled(0.4, roughness=0.5)
+    # Only the diffuse base is left, attenuated by the specular albedo at the table's grazing end.
+    expected = principled.diffuse_weight(np.array([0.0]))[0] * 0.4 / np.pi
+    assert principled.shade(cos_i, cos_o, cos_io)[0] == pytest.approx(expected, rel=1e-12)
+    # Above both horizons shade() is the BRDF (to the last bit).
+    rng = np.random.default_rng(3)
+    n = np.broadcast_to([0.0, 0.0, 1.0], (50, 3))
+    wi = unit(rng.normal(size=(50, 3)) + [0, 0, 1.5])
+    wo = unit(rng.normal(size=(50, 3)) + [0, 0, 1.5])
+    for brdf in (lambert, GGX(0.5, 0.3), principled):
+        ci, co, cio = (np.einsum("ij,ij->i", a, b) for a, b in ((wi, n), (wo, n), (wi, wo)))
+        np.testing.assert_array_equal(brdf.shade(ci, co, cio)[(ci > 0) & (co > 0)], brdf(wi, wo, n)[(ci > 0) & (co > 0)])
