@@ -33,7 +33,8 @@ if [[ ! -f $stamp || pyproject.toml -nt $stamp ]]; then
 fi
 
 if [[ $run_main_job -eq 1 ]]; then
-    rm -rf archive
-    .venv/bin/rsodb ingest data_samples --archive archive
-    .venv/bin/rsodb ls --archive archive
+    # The main job: ingest the samples, find every pass's period, a short spin-state fit of every
+    # pass, HTML reports; it ends by printing the path of reports/index.html.
+    rm -rf archive reports
+    .venv/bin/rsodb pipeline data_samples --archive archive --out reports
 fi
