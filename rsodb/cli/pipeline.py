@@ -4,10 +4,8 @@ Ingest every observation file under DATA_DIR, find every pass's spin period, run
 spin-state fit of every pass (Dask LocalClusters), and write the period and fit reports of every
 object plus an index page; then print where the reports are.
 
-The short fits run one campaign per model: each known model spins about its own body axis
-(`QUICK_SPIN_AXES`), and a worker that fits one model builds that model's renderer cache once
-(the cache, not the chain, is most of a short fit's cost), so the cores are shared among the
-models' campaigns rather than every worker building every cache.
+The short fits run one campaign per model, because each known model spins about its own body
+axis (`QUICK_SPIN_AXES`); the campaigns share one LocalCluster.
 """
 from __future__ import annotations
 
@@ -136,7 +134,8 @@ def run_pipeline(data_dir, archive_dir, out_dir, *, fit_config=None, fit_name: s
     written = []
     for norad in norads:
         try:
-            written.append(("periods", norad, build_period_report(archive, norad).write(out_dir / f"{norad}_periods.html")))
+            report_path = out_dir / f"{norad}_periods.html"
+            written.append(("periods", norad, build_period_report(archive, norad).write(report_path)))
         except ValueError as error:
             log(f"object {norad}: no period report ({error})")
         if fit and rows:
@@ -145,7 +144,7 @@ def run_pipeline(data_dir, archive_dir, out_dir, *, fit_config=None, fit_name: s
                                 .write(out_dir / f"{norad}_fits.html")))
             except ValueError as error:
                 log(f"object {norad}: no fit report ({error})")
-    index = _write_index(out_dir, archive, written)
+    index = _write_index(out_dir, archive, written, fit_name if fit and rows else None)
     summary["reports"] = [str(path) for _, _, path in written]
     summary["index"] = str(index)
     summary["elapsed_s"] = time.perf_counter() - started
@@ -176,9 +175,12 @@ def quick_fit_configs(norads) -> dict:
 
 def _fit_all(archive, rows, fit_config, fit_name, workers, progress) -> list:
     """Fit every pass: one campaign per distinct configuration (per model for the quick fit), the
-    campaigns side by side with the workers shared among them."""
+    campaigns side by side on one LocalCluster, so no worker idles while another object's passes wait."""
+    import logging
+
+    from distributed import LocalCluster
+
     from rsodb.campaign import run_campaign
-    from rsodb.fit.shapes import shape_for_norad
     from rsodb.pool import default_processes
 
     if fit_config is not None:
@@ -189,30 +191,55 @@ def _fit_all(archive, rows, fit_config, fit_name, workers, progress) -> list:
     for row in rows:
         config = configs[row.norad]
         config = config.replace(name=fit_name) if fit_name else config
-        key = (shape_for_norad(row.norad) if config.model.shape == "auto" else config.model.shape,
-                json.dumps(config.to_dict(), sort_keys=True))
-        groups.setdefault(key, (config, []))[1].append(row.pass_id)
-    n_workers = workers or default_processes()
-    side_by_side = min(len(groups), n_workers)
-    per_campaign = max(1, n_workers // side_by_side)
+        groups.setdefault(json.dumps(config.to_dict(), sort_keys=True), (config, []))[1].append(row.pass_id)
+    # A dashboard on a free port (":0") never collides with another cluster's on 8787.
+    with LocalCluster(n_workers=workers or default_processes(), threads_per_worker=1, processes=True,
+                      dashboard_address=":0", silence_logs=logging.ERROR) as cluster:
 
-    def campaign(group):
-        config, pass_ids = group
-        return run_campaign(archive, pass_ids=pass_ids, config=config, n_workers=per_campaign, progress=progress)
+        def campaign(group):
+            config, pass_ids = group
+            return run_campaign(archive, pass_ids=pass_ids, config=config, scheduler=cluster.scheduler_address,
+                                progress=progress)
 
-    with ThreadPoolExecutor(side_by_side) as threads:
-        return list(threads.map(campaign, [groups[key] for key in sorted(groups)]))
+        with ThreadPoolExecutor(len(groups)) as threads:
+            return list(threads.map(campaign, [groups[key] for key in sorted(groups)]))
 
 
-def _write_index(out_dir: Path, archive, written) -> Path:
-    from rsodb.report.html import Document, Paragraph, Raw
+def _write_index(out_dir: Path, archive, written, fit_name: str | None) -> Path:
+    """index.html: links to every report and one table row per pass (period and fitted spin period)."""
+    from rsodb.fit.result import FitResult
+    from rsodb.periods import PeriodResult
+    from rsodb.report.html import Document, Paragraph, Raw, Table
 
-    names = {row.norad: row.name for row in archive.catalog()}
+    rows = archive.catalog()
+    names = {row.norad: row.name for row in rows}
     items = "".join(f'<li><a href="{html.escape(path.name)}">{html.escape(names.get(norad, str(norad)))} '
                     f'(NORAD {norad}): {kind}</a></li>' for kind, norad, path in written)
+    table = []
+    for row in rows:
+        period = fit = "-"
+        if "default" in archive.result_names(row.pass_id, "periods"):
+            result = archive.load_result(row.pass_id, "periods", "default", PeriodResult.from_hdf5)
+            period = f"{result.best_period_s:.4f} +- {result.uncertainty_s:.4f} ({result.verdict})"
+        rms = converged = "-"
+        if fit_name and fit_name in archive.result_names(row.pass_id, "fits"):
+            record = archive.load_result(row.pass_id, "fits", fit_name, FitResult.from_hdf5).to_dict()
+            spin = record["parameters"].get("spin_period_s")
+            fit = (f"{spin['median']:.4f} -{spin['median'] - spin['p16']:.4f} +{spin['p84'] - spin['median']:.4f}"
+                   if spin else "fixed")
+            rms, converged = f"{record['residual_rms_mag']:.3f}", "yes" if record["converged"] else "no"
+        start = str(row.start_utc)[:19].replace("T", " ")
+        table.append((row.pass_id, f"{names[row.norad]} ({row.norad})", row.band, start, period, fit, rms, converged))
     doc = Document("rsodb reports").add(
-        Paragraph(f"Archive {archive.path.resolve()}: {len(archive.catalog())} passes of {len(names)} object(s)."),
-        Raw(f"<ul>{items}</ul>"))
+        Paragraph(f"Archive {archive.path.resolve()}: {len(rows)} passes of {len(names)} object(s)."),
+        Raw(f"<ul>{items}</ul>"),
+        Table(("pass", "object", "band", "start UTC", "period search (s, synodic)",
+               f"fit {fit_name!r}: spin period (s)" if fit_name else "spin period fit", "residual RMS (mag)",
+               "converged"), tuple(table), numeric=frozenset({6})),
+        Paragraph("The period search gives the light curve's apparent (synodic) period; the fit gives the spin "
+                  "period of the attitude model, which differs from it by the precession and the moving "
+                  "Sun-observer geometry. A short fit is a first look: rerun 'rsodb fit' or 'rsodb campaign' "
+                  "with the full settings before quoting a result.", "meta"))
     return doc.write(out_dir / "index.html")
 
 
