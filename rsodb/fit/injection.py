@@ -98,6 +98,12 @@ class Recovery:
         Posterior summary (p16/p84 on the median's unrolled branch for wrapped angles).
     covered : mapping of str to bool
         Whether ``p16 <= truth <= p84`` (angles compared on the unrolled branch).
+    quantile : mapping of str to float
+        Fraction of the kept posterior draws below the truth (0..1). For a calibrated fit it
+        is uniform over truths drawn from the prior; `covered` is ``0.16 <= quantile <= 0.84``
+        up to the percentiles' interpolation.
+    autocorr_lengths : float
+        Kept chain length in autocorrelation times (the longest tau of any parameter).
     converged : bool
     verdict : str
     elapsed_s : float
@@ -108,6 +114,8 @@ class Recovery:
     p16: Mapping[str, float]
     p84: Mapping[str, float]
     covered: Mapping[str, bool]
+    quantile: Mapping[str, float]
+    autocorr_lengths: float
     converged: bool
     verdict: str
     elapsed_s: float
@@ -122,6 +130,19 @@ def _covered(space, result, truth) -> dict[str, bool]:
             value = centre + np.mod(value - centre + parameter.period / 2, parameter.period) - parameter.period / 2
         covered[parameter.name] = bool(result.p16[i] <= value <= result.p84[i])
     return covered
+
+
+def _quantiles(space, result, truth) -> dict[str, float]:
+    quantiles = {}
+    for i, parameter in enumerate(space.free):
+        draws = result.samples[:, i]
+        value = truth[parameter.name]
+        if parameter.period is not None:
+            # The draws are unrolled around their circular mean: put the truth on their branch.
+            centre = np.median(draws)
+            value = centre + np.mod(value - centre + parameter.period / 2, parameter.period) - parameter.period / 2
+        quantiles[parameter.name] = float(np.mean(draws < value))
+    return quantiles
 
 
 def draw_visible_truth(posterior, rng: np.random.Generator, attempts: int = 200) -> dict[str, float]:
@@ -187,7 +208,8 @@ def recover(template: Pass, config, seed: int, *, noise_mag: float, chain_dir) -
     names = problem.posterior.space.names
     return Recovery(truth, dict(zip(names, result.median.tolist())), dict(zip(names, result.p16.tolist())),
                     dict(zip(names, result.p84.tolist())), _covered(problem.posterior.space, result, truth),
-                    result.converged, result.verdict, time.perf_counter() - started)
+                    _quantiles(problem.posterior.space, result, truth),
+                    float((result.n_steps - result.discard) / np.nanmax(result.autocorr_time)), result.converged, result.verdict, time.perf_counter() - started)
 
 
 def coverage_bounds(n: int, p: float = 0.68, sigmas: float = 3.0) -> tuple[float, float]:

@@ -21,10 +21,10 @@ def _figure(width_in: float, height_in: float):
     return Figure(figsize=(width_in, height_in), layout="constrained")
 
 
-def _saved(figure, path):
+def _saved(figure, path, dpi: int = 110):
     if path is not None:
         Path(path).parent.mkdir(parents=True, exist_ok=True)
-        figure.savefig(path, dpi=110)
+        figure.savefig(path, dpi=dpi)
     return figure
 
 
@@ -42,13 +42,13 @@ def corner_figure(result, path=None, truths=None):
     import corner
 
     ndim = len(result.names)
-    figure = _figure(2.0 * ndim + 1, 2.0 * ndim + 1)
+    figure = _figure(1.5 * ndim + 1, 1.5 * ndim + 1)
     marks = None if truths is None else [truths.get(n) for n in result.names]
     corner.corner(np.asarray(result.samples), fig=figure, labels=list(result.space.labels),
                   quantiles=[0.16, 0.5, 0.84], show_titles=True, title_fmt=".4g", truths=marks,
                   title_kwargs={"fontsize": 9}, label_kwargs={"fontsize": 9})
     figure.suptitle(f"{result.pass_id}: posterior of fit {result.name!r}", fontsize=10)
-    return _saved(figure, path)
+    return _saved(figure, path, dpi=80)
 
 
 def lightcurve_figure(result, path=None):
@@ -77,11 +77,12 @@ def lightcurve_figure(result, path=None):
                   f"reduced chi2 {result.reduced_chi2:.2f}", fontsize=10)
     bottom.axhline(0.0, color="0.5", lw=0.8)
     if sigma is not None:
-        bottom.fill_between(t, -sigma, sigma, color="C0", alpha=0.2, lw=0, label="1 sigma (errors + jitter)")
-        bottom.legend(loc="upper right", fontsize=8)
+        bottom.fill_between(t, -sigma, sigma, color="C0", alpha=0.2, lw=0)
+        # Said in the title rather than a legend box, which would hide residuals.
+        bottom.set_title("residuals; shaded: 1 sigma (quoted errors + jitter)", fontsize=8, loc="left")
     bottom.plot(t, residual, ".", ms=3, color="0.2")
     bottom.invert_yaxis()
-    bottom.set_ylabel("obs - model")
+    bottom.set_ylabel("obs - model [mag]" if sigma is not None else "obs - model")
     bottom.set_xlabel(f"seconds since {str(result.time_utc[0])[:23]} UTC")
     return _saved(figure, path)
 
@@ -106,15 +107,18 @@ def trace_figure(result, chain=None, path=None):
     ndim = chain.shape[2]
     figure = _figure(9, 1.6 * ndim + 0.8)
     axes = np.atleast_1d(figure.subplots(ndim, 1, sharex=True))
-    steps = np.arange(chain.shape[0])
+    # At most ~300 steps drawn per walker: a longer trace looks the same at this width and
+    # its antialiased lines would make a PNG of several MB.
+    stride = max(1, chain.shape[0] // 300)
+    steps = np.arange(chain.shape[0])[::stride]
     for i, axis in enumerate(axes):
-        axis.plot(steps, chain[:, :, i], lw=0.4, alpha=0.5, color="k")
+        axis.plot(steps, chain[::stride, :, i], lw=0.5, alpha=0.5, color="k", antialiased=False)
         axis.axvspan(0, result.discard, color="C1", alpha=0.12, lw=0)
         axis.set_ylabel(result.space.labels[i], fontsize=8)
-    axes[0].set_title(f"{result.pass_id}: walker traces (burn-in of {result.discard} steps shaded); {result.verdict}",
-                      fontsize=9)
+    axes[0].set_title(f"{result.pass_id}: walker traces (burn-in of {result.discard} steps shaded)\n"
+                      f"{result.verdict.split('. ')[0]}", fontsize=9)
     axes[-1].set_xlabel("step")
-    return _saved(figure, path)
+    return _saved(figure, path, dpi=90)
 
 
 def save_all(result, directory, stem: str | None = None, truths=None) -> dict[str, Path]:

@@ -31,6 +31,15 @@ def load_fits(archive, norad: int, name: str = "default", band: str | None = Non
     return results
 
 
+def _date_axis(axis) -> None:
+    """Concise date labels (one night of passes reads as times, a season as dates)."""
+    import matplotlib.dates as mdates
+
+    locator = mdates.AutoDateLocator()
+    axis.xaxis.set_major_locator(locator)
+    axis.xaxis.set_major_formatter(mdates.ConciseDateFormatter(locator))
+
+
 def _dates(results):
     return np.array([r.time_utc[0] for r in results], dtype="datetime64[ns]").astype("datetime64[ms]").astype(object)
 
@@ -56,6 +65,7 @@ def parameters_figure(results):
         axis.grid(alpha=0.3)
     axes[0].set_title("Posterior median with 16/84 percentiles per pass (red: chain not converged)", fontsize=9)
     axes[-1].set_xlabel("pass date (UTC)")
+    _date_axis(axes[-1])
     return figure
 
 
@@ -71,16 +81,21 @@ def period_figure(results, periods):
         axis.errorbar([date], [r.median[j]], yerr=[[r.median[j] - r.p16[j]], [r.p84[j] - r.median[j]]], fmt="o",
                       color="C0" if r.converged else "C3", ms=5, capsize=2)
     shown = [p for p in periods if math.isfinite(p.best_period_s) and p.epoch_utc is not None]
+    # 4x the periodogram period only when some fit is up there: otherwise it squeezes the axis.
+    fit_max = max((r.p84[r.names.index("spin_period_s")] for r in fitted), default=0.0)
+    multiples = (2, 4) if any(fit_max > 3 * p.best_period_s for p in shown) else (2,)
     for p in shown:
         date = np.datetime64(p.epoch_utc, "ms").astype(object)
         axis.errorbar([date], [p.best_period_s], yerr=[p.uncertainty_s], fmt="s", mfc="none", color="C2", ms=6)
-        for multiple in (2, 4):
+        for multiple in multiples:
             axis.plot([date], [multiple * p.best_period_s], "x", color="0.6", ms=5)
-    axis.plot([], [], "o", color="C0", label="MCMC fit, median and 16/84 (red: not converged)")
+    axis.plot([], [], "o", color="C0", label="MCMC fit, median and 16/84 (converged)")
+    axis.plot([], [], "o", color="C3", label="MCMC fit, chain not converged")
     axis.plot([], [], "s", mfc="none", color="C2", label="periodogram (synodic), 1 sigma")
-    axis.plot([], [], "x", color="0.6", label="2x and 4x the periodogram period")
+    axis.plot([], [], "x", color="0.6", label=" and ".join(f"{m}x" for m in multiples) + " the periodogram period")
     axis.set_ylabel("spin period [s]")
     axis.set_xlabel("pass date (UTC)")
+    _date_axis(axis)
     axis.legend(fontsize=8, loc="best")
     axis.grid(alpha=0.3)
     return figure
