@@ -483,6 +483,11 @@ with the fast path (`raycast.cache.SceneCache`, visibility grid {CACHE_GRID_SIZE
 1000 km (m_st). A fit with the `precessing` attitude family and the object's model recovers the
 spin state; the free magnitude offset of the fit absorbs the zero point.
 
+The COSMOS 2502 ccd_phot file and the phc file are the same pass, seen from Derenivka and from
+Uzhhorod, with one spin state (its phases referred to each file's own mid-time). The main job
+(`rsodb pipeline data_samples --archive archive --out reports`) fits every pass with the
+object's model and compares the fitted spin periods with the period search.
+
 The apparent period is what the project's period search (`rsodb.periods.find_period`) finds on
 the noiseless curve: the light curve of a precessing body in an orbiting frame repeats at
 neither the spin period nor exactly any multiple of it, so this is the number a period search
