@@ -375,13 +375,15 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, factor_toler
         # Re-index the occludable elements after dropping.
         new_index = np.cumsum(keep_mask) - 1
         occl = new_index[occl_kept]
-    # Group elements by material and by geometric and shading normals quantised to a third of
-    # the material's normal step: elements of one group are shaded with their area-weighted
-    # mean normal (an error second order in the bin, like the normal's spread within an
-    # element), and their visibility columns are factorised together (_visibility_factors).
+    # Group elements by material, geometric normal (exactly: its gates [n_g.s > 0] and
+    # max(n_g.o, 0) are discontinuous, merging faces would move the terminator and the limb) and
+    # shading normal quantised to a third of the material's normal step: elements of one group
+    # are shaded with their area-weighted mean normal (an error second order in the bin, like
+    # the normal's spread within an element), and their visibility columns are factorised
+    # together (_visibility_factors).
     quantum = (normal_step_rad / _MERGE_FRACTION)[el["material"]][:, None]
     # Material first in the key, so np.unique sorts the groups into one block per material.
-    key = np.column_stack([el["material"], np.round(el["geo"] / quantum), np.round(el["normal"] / quantum)]).astype(np.int64)
+    key = np.column_stack([el["material"], np.round(el["geo"] / 1e-6), np.round(el["normal"] / quantum)]).astype(np.int64)
     _, group, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
     group = group.reshape(-1)
     n_groups = len(counts)
