@@ -304,7 +304,11 @@ class FitResult:
             flags.append("normalised comparison (the published workflow's): observed errors are ignored "
                          "and the intervals are not calibrated")
 
-        stride = max(1, math.ceil(flat.shape[0] / MAX_STORED_SAMPLES))
+        # Thin along the steps, keeping every walker: a stride over the flattened (step, walker)
+        # order would keep only some walkers (every other one for a stride of 2), which skews
+        # the stored draws when walkers sit in different modes.
+        step_stride = max(1, math.ceil(kept.shape[0] * kept.shape[1] / MAX_STORED_SAMPLES))
+        stored = flat.reshape(kept.shape)[::step_stride][: max(1, MAX_STORED_SAMPLES // kept.shape[1])]
         return cls(
             pass_id=pass_id, name=name, space=space, likelihood=likelihood.kind,
             median=median_wrapped, p16=p16 + shift, p84=p84 + shift, best=best,
@@ -313,7 +317,8 @@ class FitResult:
             discard=discard, converged=converged, verdict=verdict, flags=tuple(flags),
             time_utc=time_utc, mag_obs=likelihood.mag_obs, mag_err=likelihood.mag_err, mag_model=mag_model,
             offset_mag=float(offset), jitter_mag=jitter, residual_rms_mag=float(np.sqrt(np.mean(residuals ** 2))),
-            chi2=chi2, dof=dof, samples=flat[::stride], chain_path=run.chain_path, elapsed_s=run.elapsed_s,
+            chi2=chi2, dof=dof, samples=stored.reshape(-1, space.ndim), chain_path=run.chain_path,
+            elapsed_s=run.elapsed_s,
             n_evaluations=int(run.n_walkers * run.steps_run + run.init.get("evaluations", 0)),
             init=dict(run.init), config=dict(config or {}),
             created_utc=datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
