@@ -129,3 +129,28 @@ def test_misspecified_model_reports_its_misfit(tmp_path):
     assert result.reduced_chi2 > 10
     assert result.jitter_mag > 0.03
     assert any(flag.startswith("model misfit") and "jitter term" in flag for flag in result.flags)
+
+
+def test_stored_draws_keep_every_walker():
+    # 400 kept steps x 16 walkers = 6400 draws, thinned to at most 4000 (MAX_STORED_SAMPLES):
+    # a stride of 2 over the flattened (step, walker) order would keep only the even walkers.
+    # Even walkers sit at P = 9.80 s and odd ones at 9.90 s, so the stored draws must hold
+    # exactly half of each (an exact count, no tolerance needed).
+    from rsodb.fit.result import MAX_STORED_SAMPLES
+    from rsodb.fit.sampler import ChainRun
+
+    template = window(read_file(TOPEX_PHV)[0], 0.0, 20.0, stride=4)
+    config = FitConfig.from_dict({"model": {"shape": "lopsided", "n_sub": 1},
+                                  "parameters": {"spin_period_s": {"kind": "uniform", "low": 9.7, "high": 10.0}}})
+    posterior = FitProblem.build(template, config).posterior
+    rng = np.random.default_rng(3)
+    n_steps, n_walkers = 800, 16
+    start = posterior.space.sample_prior(rng, 1)[0]
+    chain = np.broadcast_to(start, (n_steps, n_walkers, start.size)).copy()
+    chain[:, :, 0] = np.where(np.arange(n_walkers) % 2 == 0, 9.80, 9.90)
+    run = ChainRun(posterior.space.names, chain, np.zeros((n_steps, n_walkers)), np.full(n_walkers, 0.3),
+                   np.full(start.size, 10.0), 0, n_steps, 1.0, {}, "")
+    result = FitResult.from_run(run, posterior, pass_id="p", name="n", time_utc=template.time_utc)
+    periods = result.samples[:, 0]
+    assert periods.size <= MAX_STORED_SAMPLES
+    assert np.sum(periods < 9.85) == np.sum(periods > 9.85) == periods.size // 2
