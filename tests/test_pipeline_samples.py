@@ -66,9 +66,11 @@ def test_pipeline_on_the_samples_writes_reports_and_fits_near_the_truth(tmp_path
     out = capsys.readouterr().out
     index = (reports / "index.html").resolve()
     assert f"open {index} to start" in out
+    page = index.read_text()
     for name in ("22076_periods.html", "22076_fits.html", "40358_periods.html", "40358_fits.html"):
         assert (reports / name).stat().st_size > 10_000, name
-        assert f'href="{name}"' in index.read_text()
+        assert f'href="{name}"' in page
+    assert page.count("<tr>") == 1 + 5  # the header and one row per pass
 
     archive = Archive(tmp_path / "archive", create=False)
     for row in archive.catalog():
