@@ -26,13 +26,16 @@ magnitudes by refining a pilot subset of the frames until two successive resolut
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from functools import partial
 import math
 
 import numpy as np
 
 from raycast.scene import Scene
 
-__all__ = ["DirectRenderer", "SUN_RADIUS_RAD", "sun_disk_directions", "orthonormal_basis"]
+__all__ = ["DirectRenderer", "SAMPLINGS", "SUN_RADIUS_RAD", "sun_disk_directions", "orthonormal_basis"]
+
+SAMPLINGS = ("adaptive", "grid")
 
 # Mean angular radius of the solar disk seen from the Earth: 0.533 deg / 2.
 SUN_RADIUS_RAD = math.radians(0.533 / 2.0)
@@ -120,12 +123,18 @@ class DirectRenderer:
     sun_samples : int, optional, points of the solar disk per BRDF evaluation for every
         material; default per material from ``accuracy_mag`` (:func:`sun_samples_for`).
     accuracy_mag : float, the accuracy the solar-disk sampling is chosen for.
+    sampling : {"adaptive", "grid"}
+        ``"adaptive"`` (default): rays at the corners of coarse cells, split down to
+        ``pixel_size_m`` only where an edge, a shadow or a shading change may lie inside
+        (:mod:`raycast.refine`); ``"grid"``: every pixel of the regular grid, the plain reference
+        the adaptive sampler is tested against.
     """
 
     scene: Scene
     pixel_size_m: float
     sun_samples: int | None = None
     accuracy_mag: float = 0.005
+    sampling: str = "adaptive"
     _state: dict = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self):
@@ -136,6 +145,8 @@ class DirectRenderer:
         if self.sun_samples is not None and not (isinstance(self.sun_samples, (int, np.integer))
                                                  and self.sun_samples >= 1):
             raise ValueError(f"sun_samples={self.sun_samples!r} must be a positive integer")
+        if self.sampling not in SAMPLINGS:
+            raise ValueError(f"sampling={self.sampling!r} is unknown; use one of {', '.join(map(repr, SAMPLINGS))}")
 
     # ---------------------------------------------------------------- construction
     @classmethod
@@ -223,6 +234,8 @@ class DirectRenderer:
         offset_v = (0.5 + (frame + 1) / _PLASTIC ** 2) % 1.0
         start_u = pu.min(axis=0) - offset_u * h
         start_v = pv.min(axis=0) - offset_v * h
+        if self.sampling == "adaptive":
+            return self._sampler().intensity(sun_body, obs_body, u, v, start_u, start_v)
         n_u = np.floor((pu.max(axis=0) - start_u) / h).astype(np.int64) + 1
         n_v = np.floor((pv.max(axis=0) - start_v) / h).astype(np.int64) + 1
         # Empty-space skipping: the grid is cut into tiles of TILE x TILE pixels and only tiles
@@ -261,47 +274,91 @@ class DirectRenderer:
             prim = hits["primitive_ids"].numpy()[hit].astype(np.int64)
             uv = hits["primitive_uvs"].numpy()[hit]
             points = rays[hit, :3] + t_hit[hit, None] * rays[hit, 3:]
-            contribution = self._shade(mesh, scene, frames, prim, uv, points, sun_body, obs_body)
+            contribution, _ = self._shade(mesh, scene, frames, prim, uv, points, sun_body, obs_body)
             result += np.bincount(frames, weights=contribution, minlength=len(result))
         return result * h * h
 
-    def _shade(self, mesh, scene, frames, prim, uv, points, sun_body, obs_body):
-        """Per-hit f cos V, averaged over the Sun samples, shape (hits,)."""
+    def _sampler(self):
+        from raycast.refine import AdaptiveSampler, EdgeTopology, coarse_levels, surface_classes
+
+        mesh, scene = self._prepared()
+        smooth = self._state["smooth"]
+        if "classes" not in self._state:
+            self._state["classes"] = surface_classes(mesh, smooth)
+            self._state["edges"] = EdgeTopology(mesh, self._state["classes"])
+        return AdaptiveSampler(mesh, scene, partial(self._shade, mesh, scene), self._flat_radiance,
+                               self._state["classes"], smooth, self._state["edges"], self.pixel_size_m,
+                               coarse_levels(mesh, self.pixel_size_m),
+                               smooth_tolerance=self.accuracy_mag / 1.0857 / 3.0)
+
+    def _shade(self, mesh, scene, frames, prim, uv, points, sun_body, obs_body, flat_table=None):
+        """Per-hit f cos V, averaged over the Sun samples, and whether the Sun reaches the hit;
+        two arrays of shape (hits,). ``flat_table`` (:meth:`_flat_radiance` of these frames)
+        gives flat-shaded hits their radiance by look-up."""
         wo = obs_body[frames]
         n_geo = mesh.face_normals[prim]
         facing = np.where(np.einsum("ij,ij->i", n_geo, wo) < 0.0, -1.0, 1.0)
         n_geo *= facing[:, None]
-        # Only smooth-shaded triangles need the barycentric interpolation of corner normals.
-        n_shade = n_geo.copy()
-        smooth = np.flatnonzero(self._state["smooth"][prim])
-        if len(smooth):
-            a, b = uv[smooth, 0, None], uv[smooth, 1, None]
-            corner = mesh.corner_normals[prim[smooth]]
-            interp = (1.0 - a - b) * corner[:, 0] + a * corner[:, 1] + b * corner[:, 2]
-            interp /= np.linalg.norm(interp, axis=1, keepdims=True)
-            interp *= np.where(np.einsum("ij,ij->i", interp, n_geo[smooth]) < 0.0, -1.0, 1.0)[:, None]
-            n_shade[smooth] = interp
         offset = np.float32(1e-4 * max(mesh.radius_m, 1.0))
         wi_all = sun_body[frames]
         lit = np.flatnonzero(np.einsum("ij,ij->i", n_geo, wi_all) > 0.0)
         total = np.zeros(len(frames))
+        reached = np.zeros(len(frames), dtype=bool)
         if len(lit) == 0:
-            return total
+            return total, reached
         rays = np.empty((len(lit), 6), dtype=np.float32)
         rays[:, :3] = points[lit] + offset * n_geo[lit]
         rays[:, 3:] = wi_all[lit]
         lit = lit[~scene.test_occlusions(rays).numpy()]
-        lit_materials = mesh.material_index[prim[lit]]
-        for material in np.unique(lit_materials):
-            idx = lit[lit_materials == material]
-            normal, wo_m = n_shade[idx], wo[idx]
-            disk, weights = sun_disk_directions(wi_all[idx], self._state["sun_samples"][material])
+        reached[lit] = True
+        smooth = self._state["smooth"][prim[lit]]
+        if flat_table is not None:
+            total[lit[~smooth]] = flat_table[frames[lit[~smooth]], prim[lit[~smooth]]]
+            lit = lit[smooth]
+            smooth = smooth[smooth]
+        # Only smooth-shaded triangles need the barycentric interpolation of corner normals.
+        n_shade = n_geo[lit]
+        if smooth.any():
+            rows = np.flatnonzero(smooth)
+            hit = lit[rows]
+            a, b = uv[hit, 0, None], uv[hit, 1, None]
+            corner = mesh.corner_normals[prim[hit]]
+            interp = (1.0 - a - b) * corner[:, 0] + a * corner[:, 1] + b * corner[:, 2]
+            interp /= np.linalg.norm(interp, axis=1, keepdims=True)
+            interp *= np.where(np.einsum("ij,ij->i", interp, n_geo[hit]) < 0.0, -1.0, 1.0)[:, None]
+            n_shade[rows] = interp
+        total[lit] = self._radiance(mesh.material_index[prim[lit]], n_shade, wi_all[lit], wo[lit])
+        return total, reached
+
+    def _radiance(self, materials, normals, sun, obs):
+        """f(s, o, n) max(n . s, 0) averaged over the solar disk, (k,) for (k,) materials and
+        (k, 3) shading normals, Sun and observer directions."""
+        total = np.zeros(len(materials))
+        mesh = self._state["mesh"]
+        for material in np.unique(materials):
+            idx = np.flatnonzero(materials == material)
+            normal, wo_m = normals[idx], obs[idx]
+            disk, weights = sun_disk_directions(sun[idx], self._state["sun_samples"][material])
             cos_o = np.einsum("ij,ij->i", normal, wo_m)
             for wi, weight in zip(disk, weights):
                 cos_i = np.einsum("ij,ij->i", normal, wi)
                 value = mesh.brdfs[material].shade(cos_i, cos_o, np.einsum("ij,ij->i", wi, wo_m))
                 total[idx] += weight * value * np.maximum(cos_i, 0.0)
         return total
+
+    def _flat_radiance(self, sun_body, obs_body):
+        """(m, t) radiance of every triangle, flat-shaded with its face normal turned toward
+        the observer, lit if its face is: what a flat triangle's hits share within a frame."""
+        mesh = self._state["mesh"]
+        m, t = len(sun_body), len(mesh.face_normals)
+        normals = np.broadcast_to(mesh.face_normals, (m, t, 3))
+        facing = np.where(np.einsum("mtj,mj->mt", normals, obs_body) < 0.0, -1.0, 1.0)
+        normals = (normals * facing[..., None]).reshape(-1, 3)
+        sun = np.repeat(sun_body, t, axis=0)
+        obs = np.repeat(obs_body, t, axis=0)
+        table = self._radiance(np.tile(mesh.material_index, m), normals, sun, obs)
+        table[np.einsum("ij,ij->i", normals, sun) <= 0.0] = 0.0
+        return table.reshape(m, t)
 
     def image(self, sun_body, obs_body):
         """What a camera looking along ``-obs_body`` sees: radiance per unit irradiance, 1/sr.
@@ -334,8 +391,8 @@ class DirectRenderer:
         if len(hit):
             frames = np.zeros(len(hit), dtype=np.int64)
             points = rays[hit, :3] + t_hit[hit, None] * rays[hit, 3:]
-            radiance[hit] = self._shade(mesh, scene, frames, hits["primitive_ids"].numpy()[hit].astype(np.int64),
-                                        hits["primitive_uvs"].numpy()[hit], points, sun, obs)
+            radiance[hit], _ = self._shade(mesh, scene, frames, hits["primitive_ids"].numpy()[hit].astype(np.int64),
+                                           hits["primitive_uvs"].numpy()[hit], points, sun, obs)
         return radiance.reshape(grid_u.shape)
 
     def _prepared(self):

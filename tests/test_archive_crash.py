@@ -39,6 +39,7 @@ class Worker:
         self.lines: list[str] = []
         self.received_s: list[float] = []  # monotonic time each line arrived
         self.started = threading.Event()
+        self.began = threading.Event()  # set at each BEGIN line
         self.thread = threading.Thread(target=self._collect, daemon=True)
         self.thread.start()
 
@@ -48,7 +49,10 @@ class Worker:
             self.received_s.append(time.monotonic())
             if line.startswith("START"):
                 self.started.set()
+            if line.startswith("BEGIN"):
+                self.began.set()
         self.started.set()
+        self.began.set()
 
     def kill(self) -> None:
         try:
@@ -121,7 +125,15 @@ def test_sigkill_at_random_moments_loses_nothing_committed(corpus, tmp_path):
     while kills < N_KILLS:
         worker = Worker("ingest", str(archive), str(directory), "--workers", "1", "--interval", "0.02")
         assert worker.started.wait(60.0), "the worker did not start"
-        time.sleep(rng.uniform(0.0, 0.8))
+        if kills % 2:
+            time.sleep(rng.uniform(0.0, 0.8))
+        else:
+            # Every other kill lands just after a commit began, while its new file is being
+            # written, so the temporary-file path is exercised on every run, fast or slow.
+            time.sleep(rng.uniform(0.0, 0.3))
+            worker.began.clear()
+            worker.began.wait(30.0)
+            time.sleep(rng.uniform(0.0, 0.01))
         worker.kill()
         kills += 1
         mid_commit += worker.killed_mid_commit()
