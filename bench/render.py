@@ -118,19 +118,25 @@ def cycles_mesh(scene):
                                   corner_normals=mesh.corner_normals, material_names=scene.material_names)
 
 
-def bench_model(name, scene, rows, pixels, grids, cycles_samples, cycles_frames, reference_pixel):
-    """All measurements of one model on one stretch of the pass; returns result rows."""
+def bench_model(name, scene, rows, pixels, grid_pixels, grids, cycles_samples, cycles_frames, reference_pixel):
+    """All measurements of one model on one stretch of the pass; returns result rows and the
+    reference's convergence (RMS mag between it and twice its pixel size)."""
     sun, obs = pass_directions(ATTITUDES[name], rows)
     n = len(sun)
     print(f"\n{name}: {n} frames, reference pixel {reference_pixel} m", flush=True)
-    reference, ref_wall, _ = timed(lambda: DirectRenderer(scene, reference_pixel).intensity(sun, obs))
-    print(f"  reference rendered in {ref_wall:.1f} s", flush=True)
+    reference, ref_wall, _ = timed(lambda: DirectRenderer(scene, reference_pixel, accuracy_mag=0.001).intensity(sun, obs))
+    check = DirectRenderer(scene, 2 * reference_pixel, accuracy_mag=0.001).intensity(sun, obs)
+    converged = rms_mag(check, reference)
+    print(f"  reference rendered in {ref_wall:.1f} s; twice its pixel differs by {converged:.5f} mag", flush=True)
     results, caches = [], {}
-    for pixel in pixels:
-        values, wall, cpu = timed(lambda: DirectRenderer(scene, pixel).intensity(sun, obs))
-        results.append(dict(model=name, frames=n, method="direct", setting=f"pixel {pixel} m", wall_s=wall,
-                            cpu_s=cpu, setup_s=0.0, error_mag=rms_mag(values, reference), memory_mb=0.0))
-        print(f"  direct {pixel} m: {wall:.2f} s wall, {cpu:.2f} s CPU, {results[-1]['error_mag']:.4f} mag", flush=True)
+    for method, sampling, sizes in (("direct", "adaptive", pixels), ("direct-grid", "grid", grid_pixels)):
+        for pixel in sizes:
+            values, wall, cpu = timed(lambda: DirectRenderer(scene, pixel, sampling=sampling).intensity(sun, obs),
+                                      repeats=3)
+            results.append(dict(model=name, frames=n, method=method, setting=f"pixel {pixel} m", wall_s=wall,
+                                cpu_s=cpu, setup_s=0.0, error_mag=rms_mag(values, reference), memory_mb=0.0))
+            print(f"  {method} {pixel} m: {wall:.2f} s wall, {cpu:.2f} s CPU, {results[-1]['error_mag']:.4f} mag",
+                  flush=True)
     for grid in grids:
         cache, build_wall, _ = timed(lambda: SceneCache.build(scene, grid_size=grid))
         caches[grid] = cache
@@ -153,7 +159,7 @@ def bench_model(name, scene, rows, pixels, grids, cycles_samples, cycles_frames,
                                 error_mag=rms_mag(result.intensity_m2_sr, reference[subset]), memory_mb=0.0))
             print(f"  cycles {samples} samples: {per_frame:.2f} s/frame -> {per_frame * n:.0f} s per light curve, "
                   f"{results[-1]['error_mag']:.4f} mag on {cycles_frames} frames", flush=True)
-    return results, caches
+    return results, caches, converged
 
 
 def chart(results, path):
@@ -164,7 +170,8 @@ def chart(results, path):
 
     models = sorted({r["model"] for r in results if r["frames"] == 150})
     fig, axes = plt.subplots(1, len(models), figsize=(6 * len(models), 4.8), squeeze=False)
-    styles = {"direct": ("o-", "C0", "direct ray casting (pixel sizes)"),
+    styles = {"direct": ("o-", "C0", "direct ray casting, adaptive (pixel sizes)"),
+              "direct-grid": ("o:", "C7", "direct ray casting, regular grid (pixel sizes)"),
               "cached": ("s-", "C2", "cached fast path (grid sizes)"),
               "cycles": ("^-", "C3", "Blender Cycles CPU (samples)")}
     for ax, model in zip(axes[0], models):
@@ -246,12 +253,15 @@ def verdict(rows, method, target_mag, target_s):
     return text
 
 
-def table(results, load, peak_mb):
+def table(results, load, peak_mb, convergence):
     lines = [f"\n## Renderer speed vs accuracy ({datetime.date.today().isoformat()}, bench/render.py)\n",
              f"Real TOPEX pass 2024-07-30 (Derenivka), paper attitudes; one direction pair per frame. "
              f"Shared 2-core machine, load average {load:.1f} at the start: wall times are inflated by other "
-             f"jobs, CPU times are this process's. Errors are RMS magnitudes against the direct renderer at the "
-             f"finest pixel size, over frames brighter than {DARK_FRACTION:g} of the peak; Cycles times are per "
+             f"jobs, CPU times are this process's. Errors are RMS magnitudes against a converged reference (the "
+             f"adaptive direct renderer at 4 mm, smooth tolerance 0.001 mag; at 8 mm it differs by "
+             + ", ".join(f"{v:.5f} mag on {k}" for k, v in convergence.items()) +
+             f"), over frames brighter than {DARK_FRACTION:g} of the peak; \"direct\" is the adaptive sampling, "
+             f"\"direct-grid\" the regular grid at the same pixel sizes; Cycles times are per "
              f"frame on a subset times the frame count (CPU summed over Blender's threads). Speed ratios are "
              f"taken at equal accuracy on CPU time: Cycles' time to reach each method's error, interpolated "
              f"log-log on its curve (extrapolated as error**-2 beyond its least accurate setting). "
@@ -283,27 +293,29 @@ def main(argv=None):
     short = np.arange(150)  # 30 s at 5 fps
     long = np.arange(2320)  # the whole 464 s pass
     quick = args.quick
-    results = []
+    results, convergence = [], {}
     for name, scene in scenes().items():
-        rows, caches = bench_model(name, scene, short, pixels=(0.1,) if quick else (0.12, 0.06, 0.03),
-                                   grids=(16,) if quick else (16, 32),
-                               cycles_samples=() if args.no_cycles else ((4,) if quick else (4, 16, 64)),
-                                   cycles_frames=3 if quick else 8, reference_pixel=0.05 if quick else 0.015)
+        rows, caches, converged = bench_model(
+            name, scene, short, pixels=(0.1,) if quick else (0.12, 0.06, 0.03, 0.015),
+            grid_pixels=(0.1,) if quick else (0.06, 0.03), grids=(16,) if quick else (16, 32, 48),
+            cycles_samples=() if args.no_cycles else ((4,) if quick else (4, 16, 64)),
+            cycles_frames=3 if quick else 8, reference_pixel=0.05 if quick else 0.004)
         results += rows
+        convergence[name] = converged
         if not quick:
             # The long pass: every 10th frame against the reference (rendering all 2320 at the
             # reference resolution would take most of the run); times are for all 2320 frames.
             subset = long[::10]
             sun, obs = pass_directions(ATTITUDES[name], long)
-            reference = DirectRenderer(scene, 0.015).intensity(sun[subset], obs[subset])
+            reference = DirectRenderer(scene, 0.004, accuracy_mag=0.001).intensity(sun[subset], obs[subset])
             cache = caches[32]
             build = cache.precompute_s
             values, wall, cpu = timed(lambda: cache.intensity(sun, obs), repeats=3)
             results.append(dict(model=name, frames=len(long), method="cached", setting="grid 32", wall_s=wall,
                                 cpu_s=cpu, setup_s=build, error_mag=rms_mag(values[subset], reference),
                                 memory_mb=cache.nbytes / 1e6))
-            values, wall, cpu = timed(lambda: DirectRenderer(scene, 0.06).intensity(sun, obs))
-            results.append(dict(model=name, frames=len(long), method="direct", setting="pixel 0.06 m", wall_s=wall,
+            values, wall, cpu = timed(lambda: DirectRenderer(scene, 0.03).intensity(sun, obs))
+            results.append(dict(model=name, frames=len(long), method="direct", setting="pixel 0.03 m", wall_s=wall,
                                 cpu_s=cpu, setup_s=0.0, error_mag=rms_mag(values[subset], reference), memory_mb=0.0))
             print(f"  long pass: cached {results[-2]['wall_s']:.2f} s / direct {results[-1]['wall_s']:.1f} s", flush=True)
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
@@ -312,7 +324,7 @@ def main(argv=None):
             print(r)
         return 0
     chart(results, CHART)
-    table(results, load, peak_mb)
+    table(results, load, peak_mb, convergence)
     return 0
 
 

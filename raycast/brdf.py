@@ -103,9 +103,13 @@ class BRDF:
 
     ``lobe_width_rad`` is the angular half-width of the narrowest specular lobe in half-vector
     space (None for purely diffuse BRDFs); renderers use it to size glint sampling.
+    ``lobe_share`` is that lobe's normal-incidence reflectance relative to the whole BRDF's
+    (1 for a pure glossy lobe; the Fresnel F0 over F0 plus the diffuse albedo for a dielectric
+    Principled): a weak lobe on a diffuse base tolerates coarser normal sampling.
     """
 
     lobe_width_rad: float | None = None
+    lobe_share: float = 1.0
 
     def __call__(self, wi, wo, n):
         wi, wo, n = np.asarray(wi), np.asarray(wo), np.asarray(n)
@@ -242,6 +246,12 @@ class Principled(BRDF):
     @property
     def lobe_width_rad(self) -> float:
         return self.alpha
+
+    @property
+    def lobe_share(self) -> float:
+        specular = self.metallic * self.base_color + (1.0 - self.metallic) * self.f0
+        total = specular + (1.0 - self.metallic) * self.base_color
+        return specular / total if total > 0.0 else 1.0
 
     @property
     def f0(self) -> float:

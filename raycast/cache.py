@@ -45,11 +45,16 @@ from raycast.scene import Scene
 __all__ = ["SceneCache", "cube_grid_directions", "cube_grid_weights"]
 
 _MAX_RAYS_PER_BATCH = 2_000_000
-_MAX_LEVEL = 16
+# Halvings per triangle at most: a piece is then 1/2**(_MAX_BISECTIONS/2) of the triangle's size.
+_MAX_BISECTIONS = 24
 # Groups of at most this many occludable elements keep their visibility columns as they are.
 _FACTOR_MIN_ELEMENTS = 4
 # Normals are grouped in bins of the material's normal step divided by this.
 _MERGE_FRACTION = 3.0
+# Lobes whose share of the reflectance is at most this are weak (see _normal_step_rad).
+_WEAK_LOBE_SHARE = 0.2
+# Frames per batch when expanding bit-held visibility (bounds the (frames, elements) arrays).
+_RAW_FRAMES_PER_CHUNK = 256
 
 
 def cube_grid_directions(grid_size):
@@ -97,14 +102,58 @@ def cube_grid_weights(directions, grid_size):
     return index, weight
 
 
-def _subdivision_template(level):
-    """Barycentric centroids (level**2, 3) of the equal sub-triangles of a triangle cut ``level`` times."""
-    up = [((3 * i + 1) / (3.0 * level), (3 * j + 1) / (3.0 * level))
-          for i in range(level) for j in range(level - i)]
-    down = [((3 * i + 2) / (3.0 * level), (3 * j + 2) / (3.0 * level))
-            for i in range(level - 1) for j in range(level - 1 - i)]
-    ab = np.asarray(up + down)
-    return np.column_stack([1.0 - ab.sum(axis=1), ab])
+def _bisect(corners, normals, owner, too_big):
+    """Split triangles at the midpoint of their longest edge until ``too_big`` says none is.
+
+    Parameters
+    ----------
+    corners : (n, 3, 3) float, corner positions.
+    normals : (n, 3, 3) float, corner shading normals, not renormalised: a midpoint takes the
+        mean of its edge's two, so any point's normal is the barycentric interpolation the
+        renderers use.
+    owner : (n,) int, carried to the pieces.
+    too_big : callable ``too_big(corners, normals, owner) -> (n,) bool``.
+
+    Returns
+    -------
+    corners, normals, owner of the pieces. Slivers are cut across their length only, so a
+    long thin triangle becomes a row of pieces, not a grid.
+    """
+    done = []
+    for _ in range(_MAX_BISECTIONS):
+        split = too_big(corners, normals, owner)
+        done.append((corners[~split], normals[~split], owner[~split]))
+        corners, normals, owner = corners[split], normals[split], owner[split]
+        if len(corners) == 0:
+            break
+        edge = np.stack([np.linalg.norm(corners[:, (k + 1) % 3] - corners[:, k], axis=1) for k in range(3)], axis=1)
+        k = np.argmax(edge, axis=1)
+        rows = np.arange(len(k))
+        a, b, c = k, (k + 1) % 3, (k + 2) % 3
+        mid = 0.5 * (corners[rows, a] + corners[rows, b])
+        mid_normal = 0.5 * (normals[rows, a] + normals[rows, b])
+        first = np.stack([corners[rows, a], mid, corners[rows, c]], axis=1)
+        second = np.stack([mid, corners[rows, b], corners[rows, c]], axis=1)
+        first_n = np.stack([normals[rows, a], mid_normal, normals[rows, c]], axis=1)
+        second_n = np.stack([mid_normal, normals[rows, b], normals[rows, c]], axis=1)
+        corners = np.concatenate([first, second])
+        normals = np.concatenate([first_n, second_n])
+        owner = np.concatenate([owner, owner])
+    else:
+        done.append((corners, normals, owner))
+    return tuple(np.concatenate([d[i] for d in done]) for i in range(3))
+
+
+def _longest_edge_m(corners):
+    """(n,) float, the longest edge of each triangle."""
+    return np.max([np.linalg.norm(corners[:, (k + 1) % 3] - corners[:, k], axis=1) for k in range(3)], axis=0)
+
+
+def _normal_spread_rad(normals):
+    """(n,) float, the largest angle between two corner shading normals of each triangle."""
+    unit = normals / np.linalg.norm(normals, axis=2, keepdims=True)
+    cosines = [np.einsum("ij,ij->i", unit[:, a], unit[:, b]) for a, b in ((0, 1), (1, 2), (2, 0))]
+    return np.arccos(np.clip(np.min(cosines, axis=0), -1.0, 1.0))
 
 
 @dataclass(frozen=True, eq=False)
@@ -117,6 +166,11 @@ class _Pose:
     area_exposed: np.ndarray    # (g,) float32 merged area of exposed elements
     factors: np.ndarray         # (d, r) float32 visibility factors, direction-major (see _visibility_factors)
     group_sum: object           # (g, r) sparse float32: sums factor-column products into groups
+    raw_bits: np.ndarray        # (d, ceil(e / 8)) uint8: visibility bits of elements not factorised
+    raw_count: int              # e, elements held as bits
+    raw_area: object            # (e, g) sparse float32: area of each element's pieces in each group
+    raw_points: np.ndarray      # (e, 3) float32: the bit-held elements' centroids (ray origins)
+    raw_normals: np.ndarray     # (e, 3) float32: and their geometric normals
     n_elements: int
     n_occludable: int           # occludable elements before factorisation
     n_rays: int
@@ -187,7 +241,8 @@ class SceneCache:
         directions = cube_grid_directions(grid_size)
         steps = np.array([_normal_step_rad(b, normal_step_deg) for b in scene.brdfs])
         tolerance = accuracy_mag / 1.0857 / 10.0
-        poses = tuple(_build_pose(s, directions, element_size_m, steps, tolerance, progress) for s in scenes)
+        quanta = np.array([_normal_quantum_rad(b, step, normal_step_deg) for b, step in zip(scene.brdfs, steps)])
+        poses = tuple(_build_pose(s, directions, element_size_m, steps, quanta, tolerance, progress) for s in scenes)
         return cls(scene, poses, parameter, values, grid_size, float(element_size_m),
                    float(np.degrees(steps.min())), sun_samples, time.perf_counter() - start)
 
@@ -235,6 +290,12 @@ class SceneCache:
             product = _interpolation_matrix(sun, self.grid_size, len(pose.factors)) @ pose.factors
             product *= _interpolation_matrix(obs, self.grid_size, len(pose.factors)) @ pose.factors
             weight += (pose.group_sum @ product.T).T
+        if pose.raw_count:
+            for begin in range(0, m, _RAW_FRAMES_PER_CHUNK):
+                sl = slice(begin, begin + _RAW_FRAMES_PER_CHUNK)
+                weight[sl] += _bit_weight(pose, sun[sl], obs[sl], self.grid_size)
+        # A lit-and-seen area is never negative; the factors' float32 rounding can make it -1e-7.
+        np.maximum(weight, np.float32(0.0), out=weight)
         cos_geo_o = obs32 @ pose.normal_geo.T
         cos_geo_s = sun32 @ pose.normal_geo.T
         weight *= np.where((cos_geo_o > 0.0) & (cos_geo_s > 0.0), cos_geo_o, np.float32(0.0))
@@ -266,7 +327,8 @@ class SceneCache:
     @property
     def nbytes(self) -> int:
         """Memory held by the visibility tables and element arrays."""
-        return int(sum(p.factors.nbytes + p.normal_shade.nbytes * 2 + p.area_exposed.nbytes for p in self.poses))
+        return int(sum(p.factors.nbytes + p.raw_bits.nbytes + p.raw_area.data.nbytes + p.raw_area.indices.nbytes
+                       + p.normal_shade.nbytes * 2 + p.area_exposed.nbytes for p in self.poses))
 
 
 def _exposed_sides(vertices, corners, normals, tolerance):
@@ -295,6 +357,44 @@ def _exposed_sides(vertices, corners, normals, tolerance):
     return exposed
 
 
+def _bit_weight(pose, sun, obs, grid_size):
+    """(m, g) float32: the bit-held elements' lit-and-seen area per group.
+
+    An element's visibility toward a direction is the bilinear mix of its bits at the four
+    grid nodes around it. Where all four bits agree (almost everywhere) it is exactly 0 or 1,
+    found with byte-wide AND/OR on the packed bits; only the elements whose bits differ around
+    the Sun or the observer are mixed with weights.
+    """
+    from scipy import sparse
+
+    m, count = len(sun), pose.raw_count
+    corners = []
+    for directions in (sun, obs):
+        index, weight = cube_grid_weights(directions, grid_size)
+        nodes, inverse = np.unique(index, return_inverse=True)
+        rows = pose.raw_bits[nodes]
+        bits = [rows[inverse.reshape(index.shape)[:, k]] for k in range(4)]
+        every = bits[0] & bits[1] & bits[2] & bits[3]
+        some = bits[0] | bits[1] | bits[2] | bits[3]
+        corners.append((bits, weight.astype(np.float32), every, some))
+    (sun_bits, sun_w, sun_all, sun_any), (obs_bits, obs_w, obs_all, obs_any) = corners
+    both = sun_all & obs_all
+    result = np.unpackbits(both, axis=1, count=count).astype(np.float32) @ pose.raw_area
+    # Mixed elements: nonzero bytes first, then their bits (the bytes are mostly zero).
+    packed = sun_any & obs_any & ~both
+    byte_frame, byte = np.nonzero(packed)
+    hit, bit = np.nonzero(np.unpackbits(packed[byte_frame, byte][:, None], axis=1))
+    frame, element = byte_frame[hit], 8 * byte[hit] + bit
+    if len(frame):
+        def mixed(bits, weight):
+            byte, shift = element >> 3, 7 - (element & 7)
+            return sum(weight[frame, k] * ((bits[k][frame, byte] >> shift) & 1) for k in range(4))
+
+        product = mixed(sun_bits, sun_w) * mixed(obs_bits, obs_w)
+        result += sparse.csr_matrix((product, (frame, element)), shape=(m, count)) @ pose.raw_area
+    return np.asarray(result, dtype=np.float32)
+
+
 def _interpolation_matrix(directions, grid_size, n_directions):
     """Bilinear interpolation on the cube map as a sparse (m, d) float32 matrix (4 entries a row)."""
     from scipy import sparse
@@ -313,75 +413,109 @@ def _normal_step_rad(brdf, normal_step_deg):
         # Diffuse shading is linear in the normal except where the cosine clips at the
         # terminator, so an element's mean normal is exact away from it.
         return math.radians(15.0)
-    return math.radians(float(np.clip(math.degrees(brdf.lobe_width_rad) / 2.0, 0.5, 3.0)))
+    # A glossy lobe needs pieces of at most half its width, capped at 3 deg; a weak lobe on a
+    # diffuse base (Principled dielectric, F0 0.04) only half its width.
+    cap = 3.0 if brdf.lobe_share > _WEAK_LOBE_SHARE else 15.0
+    return math.radians(float(np.clip(math.degrees(brdf.lobe_width_rad) / 2.0, 0.5, cap)))
 
 
-def _build_pose(scene, directions, element_size_m, normal_step_rad, factor_tolerance, progress):
+def _normal_quantum_rad(brdf, step_rad, normal_step_deg):
+    """Bin width of shading normals merged into one group for this material.
+
+    A third of the piece step; for a weak lobe on a diffuse base (lobe share under 20%, e.g.
+    Principled dielectric with F0 0.04), half the lobe when that is wider: such a BRDF varies
+    little over 7 deg at roughness 0.5, and a smooth-shaded tube's pieces then fall into
+    thousands of groups instead of a hundred thousand.
+    """
+    if normal_step_deg is not None or brdf is None or not brdf.lobe_width_rad or brdf.lobe_share > _WEAK_LOBE_SHARE:
+        return step_rad / _MERGE_FRACTION
+    return max(step_rad / _MERGE_FRACTION, brdf.lobe_width_rad / 2.0)
+
+
+def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quantum_rad, factor_tolerance, progress):
     mesh = scene.posed()
     corners, n_geo = mesh.corners_m, mesh.face_normals
     vertices = np.unique(np.round(mesh.vertices_m, 9), axis=0)
     tolerance = 1e-6 * max(mesh.radius_m, 1.0)
     exposed = _exposed_sides(vertices, corners, n_geo, tolerance)
     inner = mesh.inner_sides()
-    # Subdivision level per triangle.
-    spread = np.stack([np.einsum("ij,ij->i", mesh.corner_normals[:, a], mesh.corner_normals[:, b])
-                       for a, b in ((0, 1), (1, 2), (2, 0))], axis=1).min(axis=1)
-    level_normal = np.ceil(np.arccos(np.clip(spread, -1.0, 1.0)) / normal_step_rad[mesh.material_index] - 1e-9)
-    # A triangle whose corner normals differ by tens of degrees (a smooth-shaded rim) would
-    # otherwise be cut into thousands of elements; 16 x 16 bounds the cost.
-    level_normal = np.minimum(level_normal, _MAX_LEVEL)
-    # Nor are elements made smaller than half of element_size_m: a small triangle's glint
-    # carries little light.
-    level_normal = np.minimum(level_normal, np.ceil(np.sqrt(2.0 * mesh.areas_m2) / (element_size_m / 2.0)))
-    # Elements of about element_size_m**2 / 2 (a right triangle with legs element_size_m).
-    level_size = np.ceil(np.sqrt(2.0 * mesh.areas_m2) / element_size_m)
+    # Visibility is sampled on *elements* of about element_size_m (their longest edge at most
+    # sqrt(2) times that: a right triangle with legs element_size_m; shadows are spatial);
+    # shading on *pieces* of elements small enough that the interpolated normal turns by at
+    # most the material's step within one (the cosine and glints are angular). A piece takes
+    # the visibility of its element. Both are cut by longest-edge bisection, so the long thin
+    # triangles of a smooth-shaded tube become rows of pieces.
     elements = []
+    parent_points, parent_geo = [], []
+    n_parents = 0
+    step = normal_step_rad[mesh.material_index]
     for side, sign in ((0, 1.0), (1, -1.0)):
-        level = np.maximum(1, np.maximum(level_normal, np.where(exposed[:, side], 1, level_size))).astype(int)
-        for lv in np.unique(level[~inner[:, side]]):
-            tris = np.flatnonzero((level == lv) & ~inner[:, side])
-            bary = _subdivision_template(lv)
-            points = np.einsum("pc,tcj->tpj", bary, corners[tris])
-            normals = np.einsum("pc,tcj->tpj", bary, mesh.corner_normals[tris])
-            normals /= np.linalg.norm(normals, axis=2, keepdims=True)
-            side_normal = sign * n_geo[tris]
-            flip = np.einsum("tpj,tj->tp", normals, side_normal) < 0.0
-            normals[flip] *= -1.0
-            k = len(bary)
-            elements.append(dict(
-                point=points.reshape(-1, 3), normal=normals.reshape(-1, 3),
-                geo=np.repeat(side_normal, k, axis=0), area=np.repeat(mesh.areas_m2[tris] / k, k),
-                material=np.repeat(mesh.material_index[tris], k),
-                exposed=np.repeat(exposed[tris, side], k)))
+        tris = np.flatnonzero(~inner[:, side])
+        if len(tris) == 0:
+            continue
+        # Elements: only the sides that can be shadowed need visibility, so only they are cut by size.
+        el_corners, el_normals, el_tri = _bisect(
+            corners[tris], mesh.corner_normals[tris], tris,
+            lambda c, n, t: ~exposed[t, side] & (_longest_edge_m(c) > math.sqrt(2.0) * element_size_m))
+        parent = n_parents + np.arange(len(el_tri))
+        parent_points.append(el_corners.mean(axis=1))
+        parent_geo.append(sign * n_geo[el_tri])
+        n_parents += len(el_tri)
+        piece_corners, piece_normals, piece_parent = _bisect(
+            el_corners, el_normals, parent,
+            lambda c, n, p: _normal_spread_rad(n) > step[el_tri[p - parent[0]]])
+        tri = el_tri[piece_parent - parent[0]]
+        normals = piece_normals.mean(axis=1)
+        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+        geo = sign * n_geo[tri]
+        normals[np.einsum("ij,ij->i", normals, geo) < 0.0] *= -1.0
+        is_exposed = exposed[tri, side]
+        elements.append(dict(
+            point=piece_corners.mean(axis=1), normal=normals, geo=geo,
+            area=0.5 * np.linalg.norm(np.cross(piece_corners[:, 1] - piece_corners[:, 0],
+                                               piece_corners[:, 2] - piece_corners[:, 0]), axis=1),
+            material=mesh.material_index[tri], exposed=is_exposed,
+            parent=np.where(is_exposed, -1, piece_parent)))
     el = {key: np.concatenate([e[key] for e in elements]) for key in elements[0]}
-    occl = np.flatnonzero(~el["exposed"])
-    visibility = np.zeros((len(directions), len(occl)), dtype=np.uint8)
+    parent_points = np.concatenate(parent_points)
+    parent_geo = np.concatenate(parent_geo)
+    # Only the visibility elements of sides that are not exposed are cast.
+    cast = np.unique(el["parent"][el["parent"] >= 0])
+    visibility = np.zeros((len(directions), 0), dtype=np.uint8)
     n_rays = 0
-    if len(occl):
+    if len(cast):
         # Two grid spacings: every node a grazing direction interpolates from.
         band = math.sin(2.0 * _grid_spacing_rad(directions))
-        visibility, n_rays = _visibility(mesh, el["point"][occl], el["geo"][occl], directions, progress, band)
-        upper = (el["geo"][occl] @ directions.T).T > 0.0
-        seen = (visibility.astype(bool) & upper).any(axis=0)
-        blocked = (~visibility.astype(bool) & upper).any(axis=0)
-        el["exposed"][occl[~blocked]] = True
-        drop = occl[~seen & blocked]
-        keep_mask = np.ones(len(el["area"]), dtype=bool)
-        keep_mask[drop] = False
-        keep_cols = seen & blocked
-        visibility = visibility[:, keep_cols]
-        occl_kept = occl[keep_cols]
-        el = {key: value[keep_mask] for key, value in el.items()}
-        # Re-index the occludable elements after dropping.
-        new_index = np.cumsum(keep_mask) - 1
-        occl = new_index[occl_kept]
-    # Group elements by material, geometric normal (exactly: its gates [n_g.s > 0] and
+        visibility, n_rays = _visibility(mesh, parent_points[cast], parent_geo[cast], directions, progress, band)
+        seen = np.zeros(len(cast), dtype=bool)
+        blocked = np.zeros(len(cast), dtype=bool)
+        for begin in range(0, len(cast), 4096):  # in chunks: (directions, elements) arrays are large
+            sl = slice(begin, begin + 4096)
+            upper = (directions @ parent_geo[cast[sl]].T) > 0.0
+            open_ = visibility[:, sl].astype(bool)
+            seen[sl] = (open_ & upper).any(axis=0)
+            blocked[sl] = (~open_ & upper).any(axis=0)
+        column = np.full(len(parent_points), -1)
+        column[cast] = np.arange(len(cast))
+        of_element = np.where(el["parent"] >= 0, column[np.maximum(el["parent"], 0)], -1)
+        occludable = of_element >= 0
+        # Never blocked: exposed after all. Never seen: dropped.
+        never_blocked = occludable & ~blocked[np.maximum(of_element, 0)]
+        el["exposed"][never_blocked] = True
+        drop = occludable & ~seen[np.maximum(of_element, 0)] & blocked[np.maximum(of_element, 0)]
+        el = {key: value[~drop] for key, value in el.items()}
+        of_element = of_element[~drop]
+        of_element[el["exposed"]] = -1
+        el["column"] = of_element
+    else:
+        el["column"] = np.full(len(el["area"]), -1)
+    occl = np.flatnonzero(el["column"] >= 0)
+    # Group pieces by material, geometric normal (exactly: its gates [n_g.s > 0] and
     # max(n_g.o, 0) are discontinuous, merging faces would move the terminator and the limb) and
-    # shading normal quantised to a third of the material's normal step: elements of one group
-    # are shaded with their area-weighted mean normal (an error second order in the bin, like
-    # the normal's spread within an element), and their visibility columns are factorised
-    # together (_visibility_factors).
-    quantum = (normal_step_rad / _MERGE_FRACTION)[el["material"]][:, None]
+    # shading normal quantised by the material's quantum (_normal_quantum_rad): pieces of one
+    # group are shaded with their area-weighted mean normal (an error second order in the
+    # bin), and their visibility is factorised together (_visibility_factors).
+    quantum = normal_quantum_rad[el["material"]][:, None]
     # Material first in the key, so np.unique sorts the groups into one block per material.
     key = np.column_stack([el["material"], np.round(el["geo"] / 1e-6), np.round(el["normal"] / quantum)]).astype(np.int64)
     _, group, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
@@ -400,22 +534,34 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, factor_toler
     exposed_mask = el["exposed"].copy()
     exposed_mask[occl] = False
     np.add.at(area_exposed, group[exposed_mask], weight_area[exposed_mask])
-    order = np.argsort(group[occl], kind="stable")
-    occl_sorted = occl[order]
-    visibility = visibility[:, order]
-    occl_groups_all = group[occl_sorted]
-    starts = np.flatnonzero(np.r_[True, np.diff(occl_groups_all) != 0]) if len(occl_sorted) else np.zeros(0, int)
-    factors, factor_starts = _visibility_factors(visibility, weight_area[occl_sorted], starts, factor_tolerance)
+    # Pieces of one group sharing a visibility element add their areas to one (group, element) pair.
+    pairs, pair_of = np.unique(np.column_stack([group[occl], el["column"][occl]]), axis=0, return_inverse=True)
+    pair_area = np.bincount(pair_of.reshape(-1), weights=weight_area[occl], minlength=len(pairs))
+    starts = np.flatnonzero(np.r_[True, np.diff(pairs[:, 0]) != 0]) if len(pairs) else np.zeros(0, int)
+    factors, factor_starts, factorised = _visibility_factors(visibility, pairs[:, 1], pair_area, starts,
+                                                             factor_tolerance)
     bounds = np.flatnonzero(np.r_[True, np.diff(material) != 0, True])
     blocks = tuple((int(material[a]), int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:]))
     from scipy import sparse
 
-    column_group = np.repeat(occl_groups_all[starts], np.diff(np.r_[factor_starts, factors.shape[1]]))
+    factor_groups = pairs[starts[factorised], 0] if len(pairs) else np.zeros(0, int)
+    column_group = np.repeat(factor_groups, np.diff(np.r_[factor_starts, factors.shape[1]]).astype(int))
     group_sum = sparse.csr_matrix((np.ones(len(column_group), dtype=np.float32),
                                    (column_group, np.arange(len(column_group)))), shape=(n_groups, len(column_group)))
+    # The other groups keep their elements' visibility as bits, and each (group, element)
+    # pair's area: an (elements, groups) sparse matrix.
+    in_raw_group = np.repeat(~factorised, np.diff(np.r_[starts, len(pairs)]).astype(int)) if len(pairs) \
+        else np.zeros(0, bool)
+    raw_columns, raw_element = np.unique(pairs[in_raw_group, 1], return_inverse=True)
+    raw_area = sparse.csr_matrix((pair_area[in_raw_group].astype(np.float32),
+                                  (raw_element.reshape(-1), pairs[in_raw_group, 0])),
+                                 shape=(len(raw_columns), n_groups))
+    raw_bits = np.packbits(visibility[:, raw_columns].astype(bool), axis=1)
     return _Pose(normal_shade.astype(np.float32), normal_geo.astype(np.float32), material,
-                 area_exposed.astype(np.float32), factors, group_sum,
-                 n_groups + len(occl_sorted), len(occl_sorted), n_rays, blocks)
+                 area_exposed.astype(np.float32), factors, group_sum, raw_bits, len(raw_columns), raw_area,
+                 parent_points[cast[raw_columns]].astype(np.float32) if len(raw_columns) else np.zeros((0, 3), np.float32),
+                 parent_geo[cast[raw_columns]].astype(np.float32) if len(raw_columns) else np.zeros((0, 3), np.float32),
+                 n_groups + len(pairs), len(pairs), n_rays, blocks)
 
 
 def _grid_spacing_rad(directions):
@@ -424,10 +570,10 @@ def _grid_spacing_rad(directions):
     return math.pi / 2.0 / n
 
 
-def _visibility_factors(visibility, area, starts, tolerance):
+def _visibility_factors(visibility, columns_of_pairs, area, starts, tolerance):
     """Compress each group's visibility into a few columns whose products give its lit-and-seen area.
 
-    For a group (elements sharing material and normals) the run time needs only
+    For a group (pieces sharing material and normals) the run time needs only
     ``W(s, o) = sum_e A_e V_e(s) V_e(o) = M(s) . M(o)`` with ``M = V diag(sqrt(A))`` (d, e).
     With ``M^T M = Q L Q^T`` and ``P = M Q`` (columns by falling eigenvalue),
     ``M(s) . M(o) = P(s) . P(o)`` exactly; keeping the first r columns leaves the error
@@ -435,37 +581,44 @@ def _visibility_factors(visibility, area, starts, tolerance):
     count with ``max_s |R(s)|^2 <= tolerance * sum(A)`` over the grid directions (bilinear
     interpolation mixes rows convexly, so the bound holds between them too): the group's
     W is then off by at most ``tolerance`` of its area. Flat panels whose shadows are a few
-    moving edges need tens of columns instead of thousands of elements.
+    moving edges need tens of columns instead of thousands of elements. A group is factorised
+    only when that keeps fewer than half its columns; the others (a few elements each, as on a
+    smooth-shaded tube whose pieces spread over many groups) keep their elements' visibility.
 
     Parameters
     ----------
-    visibility : (d, e) uint8, occludable elements sorted by group.
-    area : (e,) float, element areas.
-    starts : (k,) int, first element of each group.
+    visibility : (d, e) uint8, elements' visibility.
+    columns_of_pairs : (p,) int, the element of each (group, element) pair, pairs sorted by group.
+    area : (p,) float, the pairs' areas.
+    starts : (k,) int, first pair of each group.
     tolerance : float, largest error of W as a fraction of the group's area.
 
     Returns
     -------
-    factors : (d, r) float32, starts : (k,) int, first factor column of each group.
+    factors : (d, r) float32, starts : (k',) int, first factor column of each factorised group,
+    factorised : (k,) bool.
     """
-    ends = np.r_[starts[1:], visibility.shape[1]].astype(int)
-    columns, new_starts, count = [], [], 0
-    for begin, end in zip(starts, ends):
-        block = visibility[:, begin:end].astype(np.float64) * np.sqrt(area[begin:end])
-        if end - begin > _FACTOR_MIN_ELEMENTS:
-            eigenvalues, vectors = np.linalg.eigh(block.T @ block)
-            projected = block @ np.ascontiguousarray(vectors[:, ::-1])
-            # tail[:, r] = |R(s)|^2 when the first r columns are kept.
-            tail = np.cumsum((projected ** 2)[:, ::-1], axis=1)[:, ::-1]
-            worst = np.r_[tail.max(axis=0), 0.0]
-            keep = int(np.argmax(worst <= tolerance * area[begin:end].sum()))
-            block = projected[:, :max(keep, 1)]
+    ends = np.r_[starts[1:], len(columns_of_pairs)].astype(int)
+    columns, new_starts, factorised, count = [], [], np.zeros(len(starts), dtype=bool), 0
+    for index, (begin, end) in enumerate(zip(starts, ends)):
+        if end - begin <= _FACTOR_MIN_ELEMENTS:
+            continue
+        block = visibility[:, columns_of_pairs[begin:end]].astype(np.float64) * np.sqrt(area[begin:end])
+        eigenvalues, vectors = np.linalg.eigh(block.T @ block)
+        projected = block @ np.ascontiguousarray(vectors[:, ::-1])
+        # tail[:, r] = |R(s)|^2 when the first r columns are kept.
+        tail = np.cumsum((projected ** 2)[:, ::-1], axis=1)[:, ::-1]
+        worst = np.r_[tail.max(axis=0), 0.0]
+        keep = max(int(np.argmax(worst <= tolerance * area[begin:end].sum())), 1)
+        if keep >= 0.5 * (end - begin):
+            continue
+        factorised[index] = True
         new_starts.append(count)
-        columns.append(block.astype(np.float32))
-        count += block.shape[1]
+        columns.append(projected[:, :keep].astype(np.float32))
+        count += keep
     if not columns:
-        return np.zeros((visibility.shape[0], 0), dtype=np.float32), np.zeros(0, int)
-    return np.ascontiguousarray(np.concatenate(columns, axis=1)), np.asarray(new_starts)
+        return np.zeros((visibility.shape[0], 0), dtype=np.float32), np.zeros(0, int), factorised
+    return np.ascontiguousarray(np.concatenate(columns, axis=1)), np.asarray(new_starts), factorised
 
 
 def _visibility(mesh, points, normals, directions, progress, horizon_band):

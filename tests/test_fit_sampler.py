@@ -182,3 +182,24 @@ def test_posterior_widths_match_the_fisher_matrix(tmp_path):
     # Truth within 4 posterior sigma (the data are one noise draw).
     assert abs(np.median(period) - TRUTH["spin_period_s"]) < 4 * expected[0]
     assert abs(np.median(phase) - TRUTH["spin_phase_deg"]) < 4 * expected[1]
+
+
+def test_population_start_never_puts_two_walkers_at_one_point(monkeypatch):
+    """When polishing leaves the search's best member where it was, that member must not be
+    a second walker at the same point: emcee's snooker move divides by walker distances."""
+    from types import SimpleNamespace
+
+    import rsodb.fit.sampler as sampler
+
+    posterior = make_posterior()
+    population = np.array([[9.86, 40.0], [9.9, 41.0], [9.8, 39.0], [9.95, 50.0], [9.7, 30.0]])
+
+    def search(posterior, settings, rng, evaluator):
+        result = SimpleNamespace(population=population, population_energies=np.arange(5.0), nfev=5, nit=1)
+        return result, population[0].copy(), 0.0, 0  # the polish did not move the best member
+
+    monkeypatch.setattr(sampler, "_search", search)
+    settings = SamplerSettings(n_walkers=6, n_steps=1, init="population", seed=3)
+    evaluator = sampler._Evaluator(posterior, posterior, None)
+    positions, _ = sampler.init_from_population(posterior, settings, np.random.default_rng(3), evaluator)
+    assert len(np.unique(positions, axis=0)) == settings.n_walkers

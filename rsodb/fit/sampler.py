@@ -363,7 +363,10 @@ def init_from_population(posterior, settings: SamplerSettings, rng: np.random.Ge
     result, best, best_cost, polish_evaluations = _search(posterior, settings, rng, evaluator)
     order = np.argsort(result.population_energies)
     members = np.unique(result.population[order], axis=0, return_index=True)[1]
-    chosen = result.population[order][np.sort(members)][: settings.n_walkers - 1]
+    chosen = result.population[order][np.sort(members)]
+    # The polished best point may be a member itself (when polishing did not move it): two
+    # walkers at one point make emcee's snooker move divide by their zero distance.
+    chosen = chosen[~np.all(chosen == best[None, :], axis=1)][: settings.n_walkers - 1]
     positions = np.vstack([best[None, :], chosen])
     bounds = space.bounds
     width = (bounds[:, 1] - bounds[:, 0]) * settings.ball_fraction
