@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import time
 from pathlib import Path
 
-__all__ = ["CampaignOutcome", "run_campaign", "select_passes"]
+__all__ = ["CampaignOutcome", "run_campaign", "run_campaigns", "select_passes"]
 
 
 @dataclass(frozen=True)
@@ -125,45 +125,78 @@ def run_campaign(archive, norad: int | None = None, *, pass_ids=None, band: str 
     -------
     CampaignOutcome
     """
-    from rsodb.archive import Archive
     from rsodb.fit.config import FitConfig
 
-    archive = archive if isinstance(archive, Archive) else Archive(archive, create=False)
-    config = (config or FitConfig()).replace(sampler={"processes": 1})
+    archive = _open(archive)
     selected = select_passes(archive, norad, pass_ids, band)
-    done = [] if restart else [p for p in selected if config.name in archive.result_names(p, "fits")]
-    todo = [p for p in selected if p not in done]
-    if restart:
-        for pass_id in todo:
-            for path in (archive.chain_path(pass_id, config.name),):
+    return run_campaigns(archive, [(config or FitConfig(), selected)], scheduler=scheduler, n_workers=n_workers,
+                         restart=restart, progress=progress)[0]
+
+
+def run_campaigns(archive, groups, *, scheduler: str | None = None, n_workers: int | None = None,
+                  restart: bool = False, progress: bool = True) -> list[CampaignOutcome]:
+    """Several campaigns at once: each group is a (FitConfig, pass ids) pair.
+
+    Every task goes through one Dask client and one completion loop, so the groups share the
+    workers without one waiting for another (the pipeline fits each object with its own
+    configuration this way). Arguments as `run_campaign`; one `CampaignOutcome` per group,
+    in the order given.
+    """
+    archive = _open(archive)
+    plans = []  # (config, passes to fit, passes already fitted)
+    for config, pass_ids in groups:
+        config = config.replace(sampler={"processes": 1})
+        done = [] if restart else [p for p in pass_ids if config.name in archive.result_names(p, "fits")]
+        todo = [p for p in pass_ids if p not in done]
+        if restart:
+            for pass_id in todo:
+                path = archive.chain_path(pass_id, config.name)
                 path.unlink(missing_ok=True)
                 path.with_name(path.name + ".bak").unlink(missing_ok=True)
+        plans.append((config, todo, done))
     started = time.perf_counter()
-    if not todo:
-        return CampaignOutcome(config.name, (), tuple(done), (), 0.0, "nothing to run")
+    if not any(todo for _, todo, _ in plans):
+        return [CampaignOutcome(config.name, (), tuple(done), (), 0.0, "nothing to run") for config, _, done in plans]
     from distributed import as_completed
     from tqdm.auto import tqdm
 
     client, cluster = _client(scheduler, n_workers)
-    fitted, failed = [], []
+    fitted = [[] for _ in plans]
+    failed = [[] for _ in plans]
+    finished = [0.0] * len(plans)
     try:
         address = client.scheduler.address
-        record = config.to_dict()
-        futures = {client.submit(_fit_task, str(Path(archive.path).resolve()), pass_id, record,
-                                 key=f"fit-{config.name}-{pass_id}", pure=False): pass_id for pass_id in todo}
-        with tqdm(total=len(todo), desc=f"campaign {config.name}", unit="pass", disable=not progress) as bar:
+        archive_path = str(Path(archive.path).resolve())
+        futures = {}
+        for number, (config, todo, _) in enumerate(plans):
+            record = config.to_dict()
+            for pass_id in todo:
+                future = client.submit(_fit_task, archive_path, pass_id, record,
+                                       key=f"fit-{config.name}-{number}-{pass_id}", pure=False)
+                futures[future] = (number, pass_id)
+        names = sorted({config.name for config, _, _ in plans})
+        with tqdm(total=len(futures), desc=f"campaign {', '.join(names)}", unit="pass", disable=not progress) as bar:
             for future in as_completed(futures):
-                pass_id = futures[future]
+                number, pass_id = futures[future]
                 error = future.exception()
                 if error is None:
-                    fitted.append(future.result())
+                    fitted[number].append(future.result())
                 else:
-                    failed.append((pass_id, f"{type(error).__name__}: {error}"))
+                    failed[number].append((pass_id, f"{type(error).__name__}: {error}"))
+                finished[number] = time.perf_counter() - started
                 bar.update(1)
     finally:
         client.close()
         if cluster is not None:
             cluster.close()
-    fitted.sort(key=lambda r: r["start_utc"])
-    return CampaignOutcome(config.name, tuple(fitted), tuple(done), tuple(failed),
-                           time.perf_counter() - started, address)
+    outcomes = []
+    for (config, _, done), results, errors, elapsed in zip(plans, fitted, failed, finished):
+        results.sort(key=lambda r: r["start_utc"])
+        outcomes.append(CampaignOutcome(config.name, tuple(results), tuple(done), tuple(errors), elapsed, address))
+    return outcomes
+
+
+def _open(archive):
+    from rsodb.archive import Archive
+
+    return archive if isinstance(archive, Archive) else Archive(archive, create=False)

@@ -9,7 +9,7 @@ import pytest
 
 from ingest import read_file
 from rsodb.archive import Archive
-from rsodb.campaign import run_campaign
+from rsodb.campaign import run_campaign, run_campaigns
 from rsodb.cli import main
 from rsodb.fit.config import FitConfig
 from rsodb.fit.injection import inject, window
@@ -65,6 +65,21 @@ def test_campaign_reports_a_failed_pass_and_carries_on(archive):
     outcome = run_campaign(archive, 22076, config=config, n_workers=1, progress=False)
     assert not outcome.ok and len(outcome.failed) == 2
     assert all("run 'rsodb periods' on it first" in error for _, error in outcome.failed)
+
+
+def test_campaigns_share_one_client_and_report_per_group(archive):
+    # Two configurations side by side (as the pipeline runs one per model): one fits its pass,
+    # the other fails on its pass; each outcome holds only its own group's passes.
+    first, second = [row.pass_id for row in archive.catalog(22076)]
+    good = FitConfig.from_dict(dict(FIT, name="groupgood"))
+    bad = FitConfig.from_dict(dict(FIT, name="groupbad", parameters={}))
+    outcomes = run_campaigns(archive, [(good, [first]), (bad, [second])], n_workers=2, progress=False)
+    assert [o.name for o in outcomes] == ["groupgood", "groupbad"]
+    assert [r["pass_id"] for r in outcomes[0].fitted] == [first] and outcomes[0].ok
+    assert outcomes[1].fitted == () and [p for p, _ in outcomes[1].failed] == [second]
+    assert archive.result_names(first, "fits").count("groupgood") == 1
+    assert "groupbad" not in archive.result_names(second, "fits")
+    assert outcomes[0].scheduler == outcomes[1].scheduler and 0 < outcomes[0].elapsed_s
 
 
 def test_campaign_needs_a_selection(archive, capsys):

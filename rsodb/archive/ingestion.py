@@ -11,6 +11,7 @@ objects grow), and whenever the passes waiting in memory exceed `_MAX_PENDING_BY
 from __future__ import annotations
 
 import hashlib
+import multiprocessing
 import os
 import time
 from collections import deque
@@ -105,7 +106,11 @@ def _results(files: list[Path], known: frozenset[str], workers: int):
     # Read far enough ahead that the readers keep parsing while the parent commits (a commit
     # round over 50 objects takes up to seconds late in a large ingest); ~50 MB of 2500-row passes.
     window = _READ_AHEAD_CHUNKS_PER_WORKER * workers
-    with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker, initargs=(known,)) as pool:
+    # Spawned, not forked: a fork taken while another thread of this process holds a lock (an
+    # Embree or BLAS pool, a logging handler) can leave the reader waiting on it forever.
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_init_worker,
+                             initargs=(known,)) as pool:
         queued = deque()
         next_chunk = 0
         try:

@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 import html
 import json
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 import sys
 import time
@@ -176,13 +175,9 @@ def quick_fit_configs(norads) -> dict:
 
 def _fit_all(archive, rows, fit_config, fit_name, workers, progress) -> list:
     """Fit every pass: one campaign per distinct configuration (per model for the quick fit), the
-    campaigns side by side on one LocalCluster, so no worker idles while another object's passes wait."""
-    import logging
-
-    from distributed import LocalCluster
-
-    from rsodb.campaign import run_campaign
-    from rsodb.pool import default_processes
+    campaigns side by side through one client of one LocalCluster, so no worker idles while another
+    object's passes wait."""
+    from rsodb.campaign import run_campaigns
 
     if fit_config is not None:
         configs = {row.norad: fit_config for row in rows}
@@ -193,17 +188,7 @@ def _fit_all(archive, rows, fit_config, fit_name, workers, progress) -> list:
         config = configs[row.norad]
         config = config.replace(name=fit_name) if fit_name else config
         groups.setdefault(json.dumps(config.to_dict(), sort_keys=True), (config, []))[1].append(row.pass_id)
-    # A dashboard on a free port (":0") never collides with another cluster's on 8787.
-    with LocalCluster(n_workers=workers or default_processes(), threads_per_worker=1, processes=True,
-                      dashboard_address=":0", silence_logs=logging.ERROR) as cluster:
-
-        def campaign(group):
-            config, pass_ids = group
-            return run_campaign(archive, pass_ids=pass_ids, config=config, scheduler=cluster.scheduler_address,
-                                progress=progress)
-
-        with ThreadPoolExecutor(len(groups)) as threads:
-            return list(threads.map(campaign, [groups[key] for key in sorted(groups)]))
+    return run_campaigns(archive, [groups[key] for key in sorted(groups)], n_workers=workers, progress=progress)
 
 
 def _write_index(out_dir: Path, archive, written, fit_name: str | None) -> Path:
