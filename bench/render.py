@@ -137,13 +137,15 @@ def bench_model(name, scene, rows, pixels, grid_pixels, grids, cycles_samples, c
                                 cpu_s=cpu, setup_s=0.0, error_mag=rms_mag(values, reference), memory_mb=0.0))
             print(f"  {method} {pixel} m: {wall:.2f} s wall, {cpu:.2f} s CPU, {results[-1]['error_mag']:.4f} mag",
                   flush=True)
-    for grid in grids:
-        cache, build_wall, _ = timed(lambda: SceneCache.build(scene, grid_size=grid))
-        caches[grid] = cache
+    for grid, edge in grids:
+        cache, build_wall, _ = timed(lambda: SceneCache.build(scene, grid_size=grid, edge_rays_per_side=edge))
+        if edge == 1:
+            caches[grid] = cache
+        setting = f"grid {grid}" + (f"+{edge}x{edge}-edge-rays" if edge > 1 else "")
         values, wall, cpu = timed(lambda: cache.intensity(sun, obs), repeats=5)
-        results.append(dict(model=name, frames=n, method="cached", setting=f"grid {grid}", wall_s=wall, cpu_s=cpu,
+        results.append(dict(model=name, frames=n, method="cached", setting=setting, wall_s=wall, cpu_s=cpu,
                             setup_s=build_wall, error_mag=rms_mag(values, reference), memory_mb=cache.nbytes / 1e6))
-        print(f"  cached grid {grid}: build {build_wall:.1f} s, {1e3 * wall:.1f} ms wall, {1e3 * cpu:.1f} ms CPU, "
+        print(f"  cached {setting}: build {build_wall:.1f} s, {1e3 * wall:.1f} ms wall, {1e3 * cpu:.1f} ms CPU, "
               f"{results[-1]['error_mag']:.4f} mag, {cache.nbytes / 1e6:.0f} MB", flush=True)
     if cycles_samples:
         from raycast.cycles import CyclesSettings, render_cycles
@@ -176,7 +178,8 @@ def chart(results, path):
               "cycles": ("^-", "C3", "Blender Cycles CPU (samples)")}
     for ax, model in zip(axes[0], models):
         for method, (marker, color, label) in styles.items():
-            rows = [r for r in results if r["model"] == model and r["method"] == method and r["frames"] == 150]
+            rows = sorted((r for r in results if r["model"] == model and r["method"] == method and r["frames"] == 150),
+                          key=lambda r: r["cpu_s"])
             if not rows:
                 continue
             ax.loglog([r["cpu_s"] for r in rows], [max(r["error_mag"], 1e-4) for r in rows], marker, color=color,
@@ -297,7 +300,8 @@ def main(argv=None):
     for name, scene in scenes().items():
         rows, caches, converged = bench_model(
             name, scene, short, pixels=(0.1,) if quick else (0.12, 0.06, 0.03, 0.015),
-            grid_pixels=(0.1,) if quick else (0.06, 0.03), grids=(16,) if quick else (16, 32, 48),
+            grid_pixels=(0.1,) if quick else (0.06, 0.03),
+            grids=((16, 1),) if quick else ((16, 1), (32, 1), (48, 1), (32, 2)),
             cycles_samples=() if args.no_cycles else ((4,) if quick else (4, 16, 64)),
             cycles_frames=3 if quick else 8, reference_pixel=0.05 if quick else 0.004)
         results += rows

@@ -36,6 +36,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 import math
 import time
+from types import SimpleNamespace
+import weakref
 
 import numpy as np
 
@@ -169,8 +171,11 @@ class _Pose:
     raw_bits: np.ndarray        # (d, ceil(e / 8)) uint8: visibility bits of elements not factorised
     raw_count: int              # e, elements held as bits
     raw_area: object            # (e, g) sparse float32: area of each element's pieces in each group
-    raw_points: np.ndarray      # (e, 3) float32: the bit-held elements' centroids (ray origins)
+    raw_corners: np.ndarray     # (e, 3, 3) float32: the bit-held elements' corners (ray origins)
     raw_normals: np.ndarray     # (e, 3) float32: and their geometric normals
+    edge_weights: np.ndarray    # (k, 3) float32: barycentric points of an element where rays decide
+    corners_m: np.ndarray       # (t, 3, 3) float32: the posed triangles, for exact visibility rays
+    ray_offset_m: float         # how far above its element a visibility ray starts
     n_elements: int
     n_occludable: int           # occludable elements before factorisation
     n_rays: int
@@ -192,12 +197,13 @@ class SceneCache:
     element_size_m: float
     normal_step_deg: float
     sun_samples: tuple
+    edge_rays_per_side: int
     precompute_s: float
     _grid: dict = field(default_factory=dict, repr=False)
 
     @classmethod
     def build(cls, scene, accuracy_mag=0.01, element_size_m=None, normal_step_deg=None, grid_size=32,
-              articulation_grid=None, sun_samples=None, progress=False) -> "SceneCache":
+              articulation_grid=None, sun_samples=None, edge_rays_per_side=1, progress=False) -> "SceneCache":
         """Precompute the elements and visibility of ``scene``.
 
         Parameters
@@ -213,12 +219,18 @@ class SceneCache:
         articulation_grid : dict, optional, ``{parameter: values}`` for one articulation parameter.
         sun_samples : int, optional, solar-disk samples in the BRDF of every material (default
             per material from its lobe width, see :func:`raycast.direct.sun_samples_for`).
+        edge_rays_per_side : int, where a shadow or horizon edge crosses an element (its
+            visibility bits differ at the grid nodes around a direction), rays toward the exact
+            direction decide from k x k points spread over it (default 1: its centroid; 2 takes
+            partial shadow into account, at about 4x the run time on COSMOS 2502).
         progress : bool, show a progress bar over the visibility rays.
         """
         if not isinstance(scene, Scene):
             raise TypeError(f"scene must be a raycast.scene.Scene, not {type(scene).__name__}")
         if not (isinstance(grid_size, (int, np.integer)) and 4 <= grid_size <= 256):
             raise ValueError(f"grid_size={grid_size!r} must be an integer in [4, 256]")
+        if not (isinstance(edge_rays_per_side, (int, np.integer)) and 1 <= edge_rays_per_side <= 8):
+            raise ValueError(f"edge_rays_per_side={edge_rays_per_side!r} must be an integer in [1, 8]")
         start = time.perf_counter()
         mesh = scene.posed()
         if element_size_m is None:
@@ -242,9 +254,11 @@ class SceneCache:
         steps = np.array([_normal_step_rad(b, normal_step_deg) for b in scene.brdfs])
         tolerance = accuracy_mag / 1.0857 / 10.0
         quanta = np.array([_normal_quantum_rad(b, step, normal_step_deg) for b, step in zip(scene.brdfs, steps)])
-        poses = tuple(_build_pose(s, directions, element_size_m, steps, quanta, tolerance, progress) for s in scenes)
+        poses = tuple(_build_pose(s, directions, element_size_m, steps, quanta, tolerance, edge_rays_per_side,
+                                  progress) for s in scenes)
         return cls(scene, poses, parameter, values, grid_size, float(element_size_m),
-                   float(np.degrees(steps.min())), sun_samples, time.perf_counter() - start)
+                   float(np.degrees(steps.min())), sun_samples, int(edge_rays_per_side),
+                   time.perf_counter() - start)
 
     # ------------------------------------------------------------------ run time
     def intensity(self, sun_body, obs_body, **parameters):
@@ -357,40 +371,81 @@ def _exposed_sides(vertices, corners, normals, tolerance):
     return exposed
 
 
+_RAYCASTERS = weakref.WeakKeyDictionary()
+
+
+def _subpoint_weights(per_side: int) -> np.ndarray:
+    """(per_side**2, 3) barycentric weights of the centroids of a triangle cut into per_side**2."""
+    points = []
+    for i in range(per_side):
+        for j in range(per_side - i):
+            points.append((i + 1 / 3, j + 1 / 3))
+            if i + j < per_side - 1:
+                points.append((i + 2 / 3, j + 2 / 3))
+    uv = np.array(points) / per_side
+    return np.column_stack([1.0 - uv.sum(axis=1), uv]).astype(np.float32)
+
+
+def _raycaster(pose):
+    """The pose's Open3D scene, built on first use in each process (it does not pickle)."""
+    if pose not in _RAYCASTERS:
+        from raycast.direct import _open3d_scene
+
+        _RAYCASTERS[pose] = _open3d_scene(SimpleNamespace(vertices_m=pose.corners_m.reshape(-1, 3)))
+    return _RAYCASTERS[pose]
+
+
+def _ray_offset_m(mesh):
+    """Visibility rays start this far above their element (clear of its own triangle)."""
+    return 1e-4 * max(mesh.radius_m, 1.0)
+
+
 def _bit_weight(pose, sun, obs, grid_size):
     """(m, g) float32: the bit-held elements' lit-and-seen area per group.
 
-    An element's visibility toward a direction is the bilinear mix of its bits at the four
-    grid nodes around it. Where all four bits agree (almost everywhere) it is exactly 0 or 1,
-    found with byte-wide AND/OR on the packed bits; only the elements whose bits differ around
-    the Sun or the observer are mixed with weights.
+    Where an element's bits at the four grid nodes around a direction agree (98% of pairs on
+    COSMOS 2502) its visibility is that bit, found with byte-wide AND/OR on the packed bits.
+    Where they differ, a shadow or horizon edge crosses the grid cell and bilinear mixing of
+    the bits would smear it: a ray from the element toward the exact direction decides
+    (exact visibility at the element centroid, as the direct renderer's shadow rays).
     """
     from scipy import sparse
 
     m, count = len(sun), pose.raw_count
-    corners = []
+    agree = []  # per direction set: (bits set at all four nodes, bits set at any), packed
     for directions in (sun, obs):
-        index, weight = cube_grid_weights(directions, grid_size)
+        index, _ = cube_grid_weights(directions, grid_size)
         nodes, inverse = np.unique(index, return_inverse=True)
         rows = pose.raw_bits[nodes]
         bits = [rows[inverse.reshape(index.shape)[:, k]] for k in range(4)]
-        every = bits[0] & bits[1] & bits[2] & bits[3]
-        some = bits[0] | bits[1] | bits[2] | bits[3]
-        corners.append((bits, weight.astype(np.float32), every, some))
-    (sun_bits, sun_w, sun_all, sun_any), (obs_bits, obs_w, obs_all, obs_any) = corners
+        agree.append((bits[0] & bits[1] & bits[2] & bits[3], bits[0] | bits[1] | bits[2] | bits[3]))
+    (sun_all, sun_any), (obs_all, obs_any) = agree
     both = sun_all & obs_all
     result = np.unpackbits(both, axis=1, count=count).astype(np.float32) @ pose.raw_area
-    # Mixed elements: nonzero bytes first, then their bits (the bytes are mostly zero).
+    # Elements seen and lit but not at all four nodes of both: nonzero bytes first, then their
+    # bits (the bytes are mostly zero).
     packed = sun_any & obs_any & ~both
     byte_frame, byte = np.nonzero(packed)
     hit, bit = np.nonzero(np.unpackbits(packed[byte_frame, byte][:, None], axis=1))
     frame, element = byte_frame[hit], 8 * byte[hit] + bit
     if len(frame):
-        def mixed(bits, weight):
-            byte, shift = element >> 3, 7 - (element & 7)
-            return sum(weight[frame, k] * ((bits[k][frame, byte] >> shift) & 1) for k in range(4))
-
-        product = mixed(sun_bits, sun_w) * mixed(obs_bits, obs_w)
+        byte, shift = element >> 3, 7 - (element & 7)
+        weights = pose.edge_weights
+        open_both = np.ones((len(frame), len(weights)), dtype=bool)
+        for directions, every in ((sun, sun_all), (obs, obs_all)):
+            # Elements whose four nodes all see the direction are visible; for the others (their
+            # bits differ around it: a shadow or horizon edge crosses the grid cell or the
+            # element) rays from points spread over the element toward the exact direction decide.
+            cast = np.flatnonzero(~((every[frame, byte] >> shift) & 1).astype(bool))
+            if len(cast):
+                e, f = element[cast], frame[cast]
+                origins = np.einsum("kc,ecx->ekx", weights, pose.raw_corners[e])
+                origins += np.float32(pose.ray_offset_m) * pose.raw_normals[e][:, None, :]
+                rays = np.concatenate([origins, np.broadcast_to(directions[f].astype(np.float32)[:, None, :],
+                                                                origins.shape)], axis=2)
+                occluded = _raycaster(pose).test_occlusions(rays.reshape(-1, 6)).numpy().astype(bool)
+                open_both[cast] &= ~occluded.reshape(len(cast), len(weights))
+        product = open_both.mean(axis=1, dtype=np.float32)
         result += sparse.csr_matrix((product, (frame, element)), shape=(m, count)) @ pose.raw_area
     return np.asarray(result, dtype=np.float32)
 
@@ -432,7 +487,8 @@ def _normal_quantum_rad(brdf, step_rad, normal_step_deg):
     return max(step_rad / _MERGE_FRACTION, brdf.lobe_width_rad / 2.0)
 
 
-def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quantum_rad, factor_tolerance, progress):
+def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quantum_rad, factor_tolerance,
+                edge_rays_per_side, progress):
     mesh = scene.posed()
     corners, n_geo = mesh.corners_m, mesh.face_normals
     vertices = np.unique(np.round(mesh.vertices_m, 9), axis=0)
@@ -446,7 +502,7 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quant
     # the visibility of its element. Both are cut by longest-edge bisection, so the long thin
     # triangles of a smooth-shaded tube become rows of pieces.
     elements = []
-    parent_points, parent_geo = [], []
+    parent_points, parent_corners, parent_geo = [], [], []
     n_parents = 0
     step = normal_step_rad[mesh.material_index]
     for side, sign in ((0, 1.0), (1, -1.0)):
@@ -459,6 +515,7 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quant
             lambda c, n, t: ~exposed[t, side] & (_longest_edge_m(c) > math.sqrt(2.0) * element_size_m))
         parent = n_parents + np.arange(len(el_tri))
         parent_points.append(el_corners.mean(axis=1))
+        parent_corners.append(el_corners)
         parent_geo.append(sign * n_geo[el_tri])
         n_parents += len(el_tri)
         piece_corners, piece_normals, piece_parent = _bisect(
@@ -478,6 +535,7 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quant
             parent=np.where(is_exposed, -1, piece_parent)))
     el = {key: np.concatenate([e[key] for e in elements]) for key in elements[0]}
     parent_points = np.concatenate(parent_points)
+    parent_corners = np.concatenate(parent_corners)
     parent_geo = np.concatenate(parent_geo)
     # Only the visibility elements of sides that are not exposed are cast.
     cast = np.unique(el["parent"][el["parent"] >= 0])
@@ -559,9 +617,10 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quant
     raw_bits = np.packbits(visibility[:, raw_columns].astype(bool), axis=1)
     return _Pose(normal_shade.astype(np.float32), normal_geo.astype(np.float32), material,
                  area_exposed.astype(np.float32), factors, group_sum, raw_bits, len(raw_columns), raw_area,
-                 parent_points[cast[raw_columns]].astype(np.float32) if len(raw_columns) else np.zeros((0, 3), np.float32),
+                 parent_corners[cast[raw_columns]].astype(np.float32) if len(raw_columns) else np.zeros((0, 3, 3), np.float32),
                  parent_geo[cast[raw_columns]].astype(np.float32) if len(raw_columns) else np.zeros((0, 3), np.float32),
-                 n_groups + len(pairs), len(pairs), n_rays, blocks)
+                 _subpoint_weights(edge_rays_per_side), mesh.corners_m.astype(np.float32), _ray_offset_m(mesh), n_groups + len(pairs), len(pairs), n_rays,
+                 blocks)
 
 
 def _grid_spacing_rad(directions):
@@ -631,8 +690,7 @@ def _visibility(mesh, points, normals, directions, progress, horizon_band):
     further below are not cast and set to 1: the cosine gate removes them.
     """
     raycaster = _open3d_scene(mesh)
-    offset = 1e-4 * max(mesh.radius_m, 1.0)
-    origins = (points + offset * normals).astype(np.float32)
+    origins = (points + _ray_offset_m(mesh) * normals).astype(np.float32)
     visibility = np.ones((len(directions), len(points)), dtype=np.uint8)
     chunk = max(1, _MAX_RAYS_PER_BATCH // len(directions))
     bar = None
