@@ -8,8 +8,8 @@ along the real TOPEX pass of 2024-07-30 from Derenivka with the paper's attitude
 
 For each it measures time per light curve and the RMS magnitude error (over frames brighter
 than 1e-3 of the peak, see DARK_FRACTION) against a converged reference (the direct renderer at the finest pixel size) for the direct renderer at several
-pixel sizes, the cached fast path at several direction-grid sizes (its one-off precomputation
-timed separately) and Blender Cycles at several sample counts (via ``raycast.cycles``, on a
+pixel sizes, the cached fast path at several direction-grid sizes, with 2x2 edge rays and with
+0.15 m visibility elements (its one-off precomputation timed separately) and Blender Cycles at several sample counts (via ``raycast.cycles``, on a
 subset of the frames, its time per light curve extrapolated from its time per frame).
 
 Output: a speed-vs-accuracy chart (docs/img/render_speed_accuracy.png) and a dated table
@@ -137,11 +137,13 @@ def bench_model(name, scene, rows, pixels, grid_pixels, grids, cycles_samples, c
                                 cpu_s=cpu, setup_s=0.0, error_mag=rms_mag(values, reference), memory_mb=0.0))
             print(f"  {method} {pixel} m: {wall:.2f} s wall, {cpu:.2f} s CPU, {results[-1]['error_mag']:.4f} mag",
                   flush=True)
-    for grid, edge in grids:
-        cache, build_wall, _ = timed(lambda: SceneCache.build(scene, grid_size=grid, edge_rays_per_side=edge))
-        if edge == 1:
+    for grid, edge, element in grids:
+        cache, build_wall, _ = timed(lambda: SceneCache.build(scene, grid_size=grid, edge_rays_per_side=edge,
+                                                              element_size_m=element))
+        if edge == 1 and element is None:
             caches[grid] = cache
-        setting = f"grid {grid}" + (f"+{edge}x{edge}-edge-rays" if edge > 1 else "")
+        setting = (f"grid {grid}" + (f"+{edge}x{edge}-edge-rays" if edge > 1 else "")
+                   + (f"+elements-{element}-m" if element else ""))
         values, wall, cpu = timed(lambda: cache.intensity(sun, obs), repeats=5)
         results.append(dict(model=name, frames=n, method="cached", setting=setting, wall_s=wall, cpu_s=cpu,
                             setup_s=build_wall, error_mag=rms_mag(values, reference), memory_mb=cache.nbytes / 1e6))
@@ -301,7 +303,8 @@ def main(argv=None):
         rows, caches, converged = bench_model(
             name, scene, short, pixels=(0.1,) if quick else (0.12, 0.06, 0.03, 0.015),
             grid_pixels=(0.1,) if quick else (0.06, 0.03),
-            grids=((16, 1),) if quick else ((16, 1), (32, 1), (48, 1), (32, 2)),
+            grids=((16, 1, None),) if quick else ((16, 1, None), (32, 1, None), (48, 1, None), (32, 2, None),
+                                                   (32, 1, 0.15)),
             cycles_samples=() if args.no_cycles else ((4,) if quick else (4, 16, 64)),
             cycles_frames=3 if quick else 8, reference_pixel=0.05 if quick else 0.004)
         results += rows
