@@ -1,7 +1,9 @@
 """A separate process for the archive's crash and concurrency tests.
 
     python tests/archive_worker.py ingest ARCHIVE PATH... [--workers N] [--interval S]
-        Ingest PATHs. Prints ``START`` once ready, ``BEGIN <norad>`` before each object commit
+                                          [--start-after FILE] [--commit-pause S]
+        Ingest PATHs (once FILE exists, if given; each object commit followed by a pause of S
+        seconds, if given, so that two ingests surely overlap). Prints ``START`` once ready, ``BEGIN <norad>`` before each object commit
         and one JSON line per commit after its rename (``{"commit": norad, "files": [[path,
         [pass_id, ...]], ...], "present": [...]}``), then ``DONE <json report>``.
     python tests/archive_worker.py read ARCHIVE MANIFEST STOPFILE
@@ -19,6 +21,7 @@ import argparse
 import hashlib
 import json
 import sys
+import time
 from pathlib import Path
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
@@ -42,7 +45,9 @@ def run_ingest(args) -> int:
 
     def announced_commit(norad, files):
         say(f"BEGIN {norad}")
-        return commit(norad, files)
+        result = commit(norad, files)
+        time.sleep(args.commit_pause)
+        return result
 
     archive.commit = announced_commit  # only this process's instance; the library is unchanged
 
@@ -52,6 +57,8 @@ def run_ingest(args) -> int:
                         "present": list(event.already_present)}))
 
     say("START")
+    while args.start_after and not Path(args.start_after).exists():
+        time.sleep(0.005)
     report = archive.ingest(args.paths, progress=False, workers=args.workers, on_commit=on_commit,
                             commit_interval_s=args.interval)
     say("DONE " + json.dumps(report.to_dict()))
@@ -116,6 +123,8 @@ def main(argv=None) -> int:
     p_ingest.add_argument("paths", nargs="+")
     p_ingest.add_argument("--workers", type=int, default=1)
     p_ingest.add_argument("--interval", type=float, default=0.02)
+    p_ingest.add_argument("--start-after", default=None)
+    p_ingest.add_argument("--commit-pause", type=float, default=0.0)
     p_ingest.set_defaults(func=run_ingest)
     p_read = sub.add_parser("read")
     p_read.add_argument("archive")

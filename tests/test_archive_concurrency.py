@@ -28,8 +28,15 @@ def test_two_ingests_and_a_reader_at_once(tmp_path):
     stop = tmp_path / "stop"
 
     reader = Worker("read", str(archive), str(manifest), str(stop))
-    first = Worker("ingest", str(archive), *map(str, paths[:80]), "--workers", "1", "--interval", "0.01")
-    second = Worker("ingest", str(archive), *map(str, paths[40:]), "--workers", "1", "--interval", "0.01")
+    # Both start together once each has imported, and pause after every commit, so they overlap
+    # whatever else the machine is doing (without the gate one spawned reader pool started a
+    # second late on a loaded machine and the first ingest had finished).
+    go = tmp_path / "go"
+    options = ("--workers", "1", "--interval", "0.01", "--start-after", str(go), "--commit-pause", "0.05")
+    first = Worker("ingest", str(archive), *map(str, paths[:80]), *options)
+    second = Worker("ingest", str(archive), *map(str, paths[40:]), *options)
+    assert first.started.wait(120) and second.started.wait(120)
+    go.touch()
     assert first.finish() == 0 and second.finish() == 0, first.process.stderr.read() + second.process.stderr.read()
     stop.touch()  # the reader makes one more round, over the final state
     assert reader.finish() == 0, "\n".join(line for line in reader.lines if line.startswith("ERROR"))
