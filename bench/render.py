@@ -7,10 +7,12 @@ along the real TOPEX pass of 2024-07-30 from Derenivka with the paper's attitude
 * the whole 464 s pass (2320 frames).
 
 For each it measures time per light curve and the RMS magnitude error (over frames brighter
-than 1e-3 of the peak, see DARK_FRACTION) against a converged reference (the direct renderer at the finest pixel size) for the direct renderer at several
-pixel sizes, the cached fast path at several direction-grid sizes, with 2x2 edge rays and with
-0.15 m visibility elements (its one-off precomputation timed separately) and Blender Cycles at several sample counts (via ``raycast.cycles``, on a
-subset of the frames, its time per light curve extrapolated from its time per frame).
+than 1e-3 of the peak, see DARK_FRACTION) against a converged reference (the direct renderer
+at the finest pixel size) for the direct renderer at several pixel sizes, the cached fast path
+at several direction-grid sizes, with 2x2 edge rays and with 0.15 m visibility elements (its
+one-off precomputation timed separately) and Blender Cycles at several sample counts (via
+``raycast.cycles``, on a subset of the frames, its time per light curve extrapolated from its
+time per frame).
 
 Output: a speed-vs-accuracy chart (docs/img/render_speed_accuracy.png) and a dated table
 appended to docs/benchmarks.md. The machine is shared: wall times are under load from other

@@ -34,9 +34,9 @@ What is precomputed
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+import functools
 import math
 import time
-from types import SimpleNamespace
 import weakref
 
 import numpy as np
@@ -173,8 +173,7 @@ class _Pose:
     raw_area: object            # (e, g) sparse float32: area of each element's pieces in each group
     raw_corners: np.ndarray     # (e, 3, 3) float32: the bit-held elements' corners (ray origins)
     raw_normals: np.ndarray     # (e, 3) float32: and their geometric normals
-    edge_weights: np.ndarray    # (k, 3) float32: barycentric points of an element where rays decide
-    corners_m: np.ndarray       # (t, 3, 3) float32: the posed triangles, for exact visibility rays
+    vertices_m: np.ndarray      # (3t, 3) float32: the posed triangles' corners, for exact visibility rays
     ray_offset_m: float         # how far above its element a visibility ray starts
     n_elements: int
     n_occludable: int           # occludable elements before factorisation
@@ -254,8 +253,7 @@ class SceneCache:
         steps = np.array([_normal_step_rad(b, normal_step_deg) for b in scene.brdfs])
         tolerance = accuracy_mag / 1.0857 / 10.0
         quanta = np.array([_normal_quantum_rad(b, step, normal_step_deg) for b, step in zip(scene.brdfs, steps)])
-        poses = tuple(_build_pose(s, directions, element_size_m, steps, quanta, tolerance, edge_rays_per_side,
-                                  progress) for s in scenes)
+        poses = tuple(_build_pose(s, directions, element_size_m, steps, quanta, tolerance, progress) for s in scenes)
         return cls(scene, poses, parameter, values, grid_size, float(element_size_m),
                    float(np.degrees(steps.min())), sun_samples, int(edge_rays_per_side),
                    time.perf_counter() - start)
@@ -307,7 +305,8 @@ class SceneCache:
         if pose.raw_count:
             for begin in range(0, m, _RAW_FRAMES_PER_CHUNK):
                 sl = slice(begin, begin + _RAW_FRAMES_PER_CHUNK)
-                weight[sl] += _bit_weight(pose, sun[sl], obs[sl], self.grid_size)
+                weight[sl] += _bit_weight(pose, sun[sl], obs[sl], self.grid_size,
+                                          _subpoint_weights(self.edge_rays_per_side))
         # A lit-and-seen area is never negative; the factors' float32 rounding can make it -1e-7.
         np.maximum(weight, np.float32(0.0), out=weight)
         cos_geo_o = obs32 @ pose.normal_geo.T
@@ -374,6 +373,7 @@ def _exposed_sides(vertices, corners, normals, tolerance):
 _RAYCASTERS = weakref.WeakKeyDictionary()
 
 
+@functools.lru_cache(maxsize=None)
 def _subpoint_weights(per_side: int) -> np.ndarray:
     """(per_side**2, 3) barycentric weights of the centroids of a triangle cut into per_side**2."""
     points = []
@@ -391,7 +391,7 @@ def _raycaster(pose):
     if pose not in _RAYCASTERS:
         from raycast.direct import _open3d_scene
 
-        _RAYCASTERS[pose] = _open3d_scene(SimpleNamespace(vertices_m=pose.corners_m.reshape(-1, 3)))
+        _RAYCASTERS[pose] = _open3d_scene(pose)  # the pose's vertices_m is a triangle soup, as a mesh's
     return _RAYCASTERS[pose]
 
 
@@ -400,14 +400,15 @@ def _ray_offset_m(mesh):
     return 1e-4 * max(mesh.radius_m, 1.0)
 
 
-def _bit_weight(pose, sun, obs, grid_size):
+def _bit_weight(pose, sun, obs, grid_size, edge_weights):
     """(m, g) float32: the bit-held elements' lit-and-seen area per group.
 
     Where an element's bits at the four grid nodes around a direction agree (98% of pairs on
     COSMOS 2502) its visibility is that bit, found with byte-wide AND/OR on the packed bits.
     Where they differ, a shadow or horizon edge crosses the grid cell and bilinear mixing of
-    the bits would smear it: a ray from the element toward the exact direction decides
-    (exact visibility at the element centroid, as the direct renderer's shadow rays).
+    the bits would smear it: rays toward the exact direction decide, from the element's points
+    at the barycentric ``edge_weights`` (k, 3), and the element counts by the fraction of them
+    both lit and seen (as the direct renderer's shadow rays).
     """
     from scipy import sparse
 
@@ -430,7 +431,7 @@ def _bit_weight(pose, sun, obs, grid_size):
     frame, element = byte_frame[hit], 8 * byte[hit] + bit
     if len(frame):
         byte, shift = element >> 3, 7 - (element & 7)
-        weights = pose.edge_weights
+        weights = edge_weights
         open_both = np.ones((len(frame), len(weights)), dtype=bool)
         for directions, every in ((sun, sun_all), (obs, obs_all)):
             # Elements whose four nodes all see the direction are visible; for the others (their
@@ -487,8 +488,7 @@ def _normal_quantum_rad(brdf, step_rad, normal_step_deg):
     return max(step_rad / _MERGE_FRACTION, brdf.lobe_width_rad / 2.0)
 
 
-def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quantum_rad, factor_tolerance,
-                edge_rays_per_side, progress):
+def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quantum_rad, factor_tolerance, progress):
     mesh = scene.posed()
     corners, n_geo = mesh.corners_m, mesh.face_normals
     vertices = np.unique(np.round(mesh.vertices_m, 9), axis=0)
@@ -502,7 +502,7 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quant
     # the visibility of its element. Both are cut by longest-edge bisection, so the long thin
     # triangles of a smooth-shaded tube become rows of pieces.
     elements = []
-    parent_points, parent_corners, parent_geo = [], [], []
+    parent_corners, parent_geo = [], []
     n_parents = 0
     step = normal_step_rad[mesh.material_index]
     for side, sign in ((0, 1.0), (1, -1.0)):
@@ -514,7 +514,6 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quant
             corners[tris], mesh.corner_normals[tris], tris,
             lambda c, n, t: ~exposed[t, side] & (_longest_edge_m(c) > math.sqrt(2.0) * element_size_m))
         parent = n_parents + np.arange(len(el_tri))
-        parent_points.append(el_corners.mean(axis=1))
         parent_corners.append(el_corners)
         parent_geo.append(sign * n_geo[el_tri])
         n_parents += len(el_tri)
@@ -534,8 +533,8 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quant
             material=mesh.material_index[tri], exposed=is_exposed,
             parent=np.where(is_exposed, -1, piece_parent)))
     el = {key: np.concatenate([e[key] for e in elements]) for key in elements[0]}
-    parent_points = np.concatenate(parent_points)
     parent_corners = np.concatenate(parent_corners)
+    parent_points = parent_corners.mean(axis=1)
     parent_geo = np.concatenate(parent_geo)
     # Only the visibility elements of sides that are not exposed are cast.
     cast = np.unique(el["parent"][el["parent"] >= 0])
@@ -619,7 +618,7 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quant
                  area_exposed.astype(np.float32), factors, group_sum, raw_bits, len(raw_columns), raw_area,
                  parent_corners[cast[raw_columns]].astype(np.float32) if len(raw_columns) else np.zeros((0, 3, 3), np.float32),
                  parent_geo[cast[raw_columns]].astype(np.float32) if len(raw_columns) else np.zeros((0, 3), np.float32),
-                 _subpoint_weights(edge_rays_per_side), mesh.corners_m.astype(np.float32), _ray_offset_m(mesh), n_groups + len(pairs), len(pairs), n_rays,
+                 mesh.vertices_m.astype(np.float32), _ray_offset_m(mesh), n_groups + len(pairs), len(pairs), n_rays,
                  blocks)
 
 

@@ -3,9 +3,10 @@
     python tests/archive_worker.py ingest ARCHIVE PATH... [--workers N] [--interval S]
                                           [--start-after FILE] [--commit-pause S]
         Ingest PATHs (once FILE exists, if given; each object commit followed by a pause of S
-        seconds, if given, so that two ingests surely overlap). Prints ``START`` once ready, ``BEGIN <norad>`` before each object commit
-        and one JSON line per commit after its rename (``{"commit": norad, "files": [[path,
-        [pass_id, ...]], ...], "present": [...]}``), then ``DONE <json report>``.
+        seconds, if given, so that two ingests surely overlap). Prints ``START`` once ready,
+        ``BEGIN <norad>`` before each object commit and one JSON line per commit after its
+        rename (``{"commit": norad, "files": [[path, [pass_id, ...]], ...], "present": [...]}``),
+        then ``DONE <json report>``.
     python tests/archive_worker.py read ARCHIVE MANIFEST STOPFILE
         Until STOPFILE exists (and once more after), repeatedly open the archive, read every pass and compare it with
         a fresh read of its source file (MANIFEST: JSON list of the corpus paths). Prints
