@@ -455,7 +455,8 @@ def _bit_weight(pose, sun, obs, grid_size, edge_weights):
                          & (obs.astype(np.float32) @ pose.raw_normals.T > 0.0), axis=1)
     both = sun_all & obs_all & facing
     # (e, m) float32 visibility products, from the packed (m, e / 8) bits.
-    lit_seen = np.unpackbits(both.T, axis=0, count=count).astype(np.float32)
+    # (C-ordered: the sparse product below is ten times slower on a Fortran-ordered array).
+    lit_seen = np.unpackbits(both, axis=1, count=count).T.astype(np.float32, order="C")
     # Elements seen and lit but not at all four nodes of both: nonzero bytes first, then their
     # bits (the bytes are mostly zero).
     packed = sun_any & obs_any & facing & ~both
