@@ -304,7 +304,7 @@ def main(argv=None):
     for name, scene in scenes().items():
         rows, caches, converged = bench_model(
             name, scene, short, pixels=(0.1,) if quick else (0.12, 0.06, 0.03, 0.015),
-            grid_pixels=(0.1,) if quick else (0.06, 0.03),
+            grid_pixels=(0.1,) if quick else (0.06, 0.045, 0.03),
             grids=((16, 1, None),) if quick else ((16, 1, None), (32, 1, None), (48, 1, None), (32, 2, None),
                                                    (32, 1, 0.15)),
             cycles_samples=() if args.no_cycles else ((4,) if quick else (4, 16, 64)),
