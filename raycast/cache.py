@@ -509,12 +509,13 @@ def _normal_step_rad(brdf, normal_step_deg):
 
 
 def _normal_quantum_rad(brdf, step_rad, normal_step_deg):
-    """Bin width of shading normals merged into one group for this material.
+    """Bin width of shading normals merged into one shading class for this material.
 
     A third of the piece step; for a weak lobe on a diffuse base (lobe share under 20%, e.g.
     Principled dielectric with F0 0.04), half the lobe when that is wider: such a BRDF varies
     little over 7 deg at roughness 0.5, and a smooth-shaded tube's pieces then fall into
-    thousands of groups instead of a hundred thousand.
+    thousands of groups instead of a hundred thousand. (A class is shaded at the per-frame
+    weighted normal of its groups, so the error stays second order in the bin.)
     """
     if normal_step_deg is not None or brdf is None or not brdf.lobe_width_rad or brdf.lobe_share > _WEAK_LOBE_SHARE:
         return step_rad / _MERGE_FRACTION
