@@ -558,12 +558,11 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quant
         band = math.sin(2.0 * _grid_spacing_rad(directions))
         el_corners, el_normals, el_tri, el_side, el_exposed, visibility, n_rays = _split_where_partly_visible(
             mesh, el_corners, el_normals, el_tri, el_side, el_exposed, n_geo, directions, band, progress)
+    parent_geo = _side_normals(n_geo, el_tri, el_side)
     # Pieces: cut from the elements until the shading normal turns by at most the material's step.
-    parent = np.arange(len(el_tri))
     piece_corners, piece_normals, piece_parent = _bisect(
-        el_corners, el_normals, parent, lambda c, n, p: _normal_spread_rad(n) > step[el_tri[p]])
-    tri, side = el_tri[piece_parent], el_side[piece_parent]
-    geo = np.where(side[:, None] == 0, 1.0, -1.0) * n_geo[tri]
+        el_corners, el_normals, np.arange(len(el_tri)), lambda c, n, p: _normal_spread_rad(n) > step[el_tri[p]])
+    tri, geo = el_tri[piece_parent], parent_geo[piece_parent]
     normals = piece_normals.mean(axis=1)
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     normals[np.einsum("ij,ij->i", normals, geo) < 0.0] *= -1.0
@@ -573,10 +572,8 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quant
                                                  piece_corners[:, 2] - piece_corners[:, 0]), axis=1),
               material=mesh.material_index[tri], exposed=is_exposed,
               parent=np.where(is_exposed, -1, piece_parent))
-    parent_corners = el_corners
-    parent_points = parent_corners.mean(axis=1)
-    parent_geo = np.where(el_side[:, None] == 0, 1.0, -1.0) * n_geo[el_tri]
-    # Only the visibility elements of sides that are not exposed were cast, in element order.
+    # Only the visibility elements of sides that are not exposed were cast; they come first, so
+    # an element's index is its visibility column.
     cast = np.flatnonzero(~el_exposed)
     if len(cast):
         seen = np.zeros(len(cast), dtype=bool)
@@ -587,9 +584,7 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quant
             open_ = visibility[:, sl].astype(bool)
             seen[sl] = (open_ & upper).any(axis=0)
             blocked[sl] = (~open_ & upper).any(axis=0)
-        column = np.full(len(parent_points), -1)
-        column[cast] = np.arange(len(cast))
-        of_element = np.where(el["parent"] >= 0, column[np.maximum(el["parent"], 0)], -1)
+        of_element = el["parent"].copy()
         occludable = of_element >= 0
         # Never blocked: exposed after all. Never seen: dropped.
         never_blocked = occludable & ~blocked[np.maximum(of_element, 0)]
@@ -668,13 +663,13 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quant
     rank[order] = np.arange(len(order))
     raw_columns, raw_element = raw_columns[order], rank[raw_element]
     raw_area = sparse.csr_matrix((pair_area[in_raw_group].astype(np.float32),
-                                  (pairs[in_raw_group, 0], raw_element.reshape(-1))),
+                                  (pairs[in_raw_group, 0], raw_element)),
                                  shape=(n_groups, len(raw_columns)))
     raw_bits = np.packbits(visibility[:, raw_columns].astype(bool), axis=1)
     return _Pose(normal_shade.astype(np.float32), class_sum, normal_geo.astype(np.float32),
                  area_exposed.astype(np.float32), factors, group_sum, raw_bits, len(raw_columns), raw_area,
-                 parent_corners[cast[raw_columns]].astype(np.float32) if len(raw_columns) else np.zeros((0, 3, 3), np.float32),
-                 parent_geo[cast[raw_columns]].astype(np.float32) if len(raw_columns) else np.zeros((0, 3), np.float32),
+                 el_corners[raw_columns].astype(np.float32) if len(raw_columns) else np.zeros((0, 3, 3), np.float32),
+                 parent_geo[raw_columns].astype(np.float32) if len(raw_columns) else np.zeros((0, 3), np.float32),
                  mesh.vertices_m.astype(np.float32), _ray_offset_m(mesh), n_groups + len(pairs), len(pairs), n_rays,
                  blocks)
 
@@ -713,9 +708,9 @@ def _split_where_partly_visible(mesh, corners, normals, tri, side, exposed, n_ge
     cast.
     """
     cast = np.flatnonzero(~exposed)
-    geo = np.where(side[:, None] == 0, 1.0, -1.0) * n_geo[tri]
+    geo = _side_normals(n_geo, tri, side)
     quarter_corners, quarter_normals = _quarters(corners[cast], normals[cast])
-    coarse = cube_grid_directions(max(4, round(math.sqrt(len(directions) / 6.0) - 1) // 4))
+    coarse = cube_grid_directions(max(4, _grid_size_of(directions) // 4))
     quarter_points = quarter_corners.mean(axis=2)
     split = np.zeros(len(cast), dtype=bool)
     n_rays = 0
@@ -738,7 +733,7 @@ def _split_where_partly_visible(mesh, corners, normals, tri, side, exposed, n_ge
     n_cast = len(whole) + 4 * int(split.sum())
     new_exposed = np.r_[np.zeros(n_cast, dtype=bool), np.ones(int(exposed.sum()), dtype=bool)]
     points = new_corners[:n_cast].mean(axis=1)
-    new_geo = np.where(new_side[:n_cast, None] == 0, 1.0, -1.0) * n_geo[new_tri[:n_cast]]
+    new_geo = _side_normals(n_geo, new_tri[:n_cast], new_side[:n_cast])
     visibility = np.ones((len(directions), n_cast), dtype=np.uint8)
     bar = None
     if progress:
@@ -756,10 +751,19 @@ def _split_where_partly_visible(mesh, corners, normals, tri, side, exposed, n_ge
     return new_corners, new_normals, new_tri, new_side, new_exposed, visibility, n_rays
 
 
+def _side_normals(n_geo, tri, side):
+    """(n, 3) geometric normals of triangle sides: ``n_geo[tri]`` for side 0, its negative for side 1."""
+    return np.where(side[:, None] == 0, 1.0, -1.0) * n_geo[tri]
+
+
+def _grid_size_of(directions):
+    """N of the cube map ``cube_grid_directions(N)`` that gave ``directions``."""
+    return round(math.sqrt(len(directions) / 6.0)) - 1
+
+
 def _grid_spacing_rad(directions):
     """The cube map's largest spacing between neighbouring directions (at the face centres)."""
-    n = round(math.sqrt(len(directions) / 6.0)) - 1
-    return math.pi / 2.0 / n
+    return math.pi / 2.0 / _grid_size_of(directions)
 
 
 def _visibility_factors(visibility, columns_of_pairs, area, starts, tolerance):
