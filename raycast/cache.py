@@ -46,6 +46,7 @@ import weakref
 
 import numpy as np
 
+from raycast import _bitkernel
 from raycast.direct import _check_directions, _open3d_scene, sun_disk_directions, sun_samples_for
 from raycast.scene import Scene
 
@@ -176,9 +177,9 @@ class _Pose:
     area_exposed: np.ndarray    # (g,) float32 merged area of exposed elements
     factors: np.ndarray         # (d, r) float32 visibility factors, direction-major (see _visibility_factors)
     group_sum: object           # (g, r) sparse float32: sums factor-column products into groups
-    raw_bits: np.ndarray        # (d, ceil(e / 8)) uint8: visibility bits of elements not factorised
+    raw_bits: np.ndarray        # (d, ceil(e / 64)) uint64: visibility bits of elements not factorised
     raw_count: int              # e, elements held as bits
-    raw_area: object            # (g, e) sparse float32: area of each element's pieces in each group
+    raw_area: object            # (g, e) CSC float32: area of each element's pieces in each group
     raw_corners: np.ndarray     # (e, 3, 3) float32: the bit-held elements' corners (ray origins)
     raw_normals: np.ndarray     # (e, 3) float32: and their geometric normals
     vertices_m: np.ndarray      # (3t, 3) float32: the posed triangles' corners, for exact visibility rays
@@ -433,55 +434,34 @@ def _ray_offset_m(mesh):
 def _bit_weight(pose, sun, obs, grid_size, edge_weights):
     """(g, m) float32: the bit-held elements' lit-and-seen area per group.
 
-    Where an element's bits at the four grid nodes around a direction agree (98% of pairs on
-    COSMOS 2502) its visibility is that bit, found with byte-wide AND/OR on the packed bits.
-    Where they differ, a shadow or horizon edge crosses the grid cell and bilinear mixing of
-    the bits would smear it: rays toward the exact direction decide, from the element's points
-    at the barycentric ``edge_weights`` (k, 3), and the element counts by the fraction of them
-    both lit and seen (as the direct renderer's shadow rays).
+    Where an element's bits at the four grid nodes around the Sun and the four around the
+    observer are all set (98% of visible pairs on COSMOS 2502) it counts whole; where they
+    differ, a shadow or horizon edge crosses the grid cell and bilinear mixing of the bits
+    would smear it: rays toward the exact direction decide, from the element's points at the
+    barycentric ``edge_weights`` (k, 3), and the element counts by the fraction of them both
+    lit and seen (as the direct renderer's shadow rays). Elements facing away from the exact
+    Sun or observer get no rays. The word-wide loops are compiled (raycast._bitkernel).
     """
-    m, count = len(sun), pose.raw_count
-    agree = []  # per direction set: (bits set at all four nodes, bits set at any), packed
-    for directions in (sun, obs):
-        index, _ = cube_grid_weights(directions, grid_size)
-        nodes, inverse = np.unique(index, return_inverse=True)
-        rows = pose.raw_bits[nodes]
-        bits = [rows[inverse.reshape(index.shape)[:, k]] for k in range(4)]
-        agree.append((bits[0] & bits[1] & bits[2] & bits[3], bits[0] | bits[1] | bits[2] | bits[3]))
-    (sun_all, sun_any), (obs_all, obs_any) = agree
-    # Elements facing away from the Sun or the observer are gated to zero later: leave them out
-    # here, so that no rays are cast for them.
-    facing = np.packbits((sun.astype(np.float32) @ pose.raw_normals.T > 0.0)
-                         & (obs.astype(np.float32) @ pose.raw_normals.T > 0.0), axis=1)
-    both = sun_all & obs_all & facing
-    # (e, m) float32 visibility products, from the packed (m, e / 8) bits.
-    # (C-ordered: the sparse product below is ten times slower on a Fortran-ordered array).
-    lit_seen = np.unpackbits(both, axis=1, count=count).T.astype(np.float32, order="C")
-    # Elements seen and lit but not at all four nodes of both: nonzero bytes first, then their
-    # bits (the bytes are mostly zero).
-    packed = sun_any & obs_any & facing & ~both
-    byte_frame, byte = np.nonzero(packed)
-    hit, bit = np.nonzero(np.unpackbits(packed[byte_frame, byte][:, None], axis=1))
-    frame, element = byte_frame[hit], 8 * byte[hit] + bit
+    area = pose.raw_area
+    sun32, obs32 = np.ascontiguousarray(sun, dtype=np.float32), np.ascontiguousarray(obs, dtype=np.float32)
+    sun_nodes, obs_nodes = (cube_grid_weights(d, grid_size)[0].astype(np.int64) for d in (sun, obs))
+    out, frame, element, need = _bitkernel.agreed_weight(
+        pose.raw_bits, sun_nodes, obs_nodes, sun32, obs32, pose.raw_normals, area.indptr, area.indices,
+        area.data, area.shape[0])
     if len(frame):
-        byte, shift = element >> 3, 7 - (element & 7)
         origins = _ray_origins(pose, edge_weights)
         open_both = np.ones((len(frame), len(edge_weights)), dtype=bool)
-        for directions, every in ((sun, sun_all), (obs, obs_all)):
-            # Elements whose four nodes all see the direction are visible; for the others (their
-            # bits differ around it: a shadow or horizon edge crosses the grid cell or the
-            # element) rays from points spread over the element toward the exact direction decide.
-            cast = np.flatnonzero(~((every[frame, byte] >> shift) & 1).astype(bool))
+        for flag, directions in ((1, sun32), (2, obs32)):
+            cast = np.flatnonzero(need & flag)
             if len(cast):
                 rays = np.empty((len(cast), len(edge_weights), 6), dtype=np.float32)
                 rays[:, :, :3] = origins[element[cast]]
-                rays[:, :, 3:] = directions[frame[cast]].astype(np.float32)[:, None, :]
+                rays[:, :, 3:] = directions[frame[cast]][:, None, :]
                 occluded = _raycaster(pose).test_occlusions(rays.reshape(-1, 6)).numpy().astype(bool)
                 open_both[cast] &= ~occluded.reshape(len(cast), len(edge_weights))
-        # These pairs are zero in lit_seen (not set at all four nodes of both).
-        lit_seen[element, frame] = open_both.mean(axis=1, dtype=np.float32)
-    result = pose.raw_area @ lit_seen
-    return np.asarray(result, dtype=np.float32)
+        _bitkernel.add_pairs(out, frame, element, open_both.mean(axis=1, dtype=np.float32), area.indptr,
+                             area.indices, area.data)
+    return out.T
 
 
 def _interpolation_matrix(directions, grid_size, n_directions):
@@ -553,9 +533,9 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quant
     el_exposed = exposed[el_tri, el_side]
     visibility = np.zeros((len(directions), 0), dtype=np.uint8)
     n_rays = 0
+    # Two grid spacings: every node a grazing direction interpolates from.
+    band = math.sin(2.0 * _grid_spacing_rad(directions))
     if not el_exposed.all():
-        # Two grid spacings: every node a grazing direction interpolates from.
-        band = math.sin(2.0 * _grid_spacing_rad(directions))
         el_corners, el_normals, el_tri, el_side, el_exposed, visibility, n_rays = _split_where_partly_visible(
             mesh, el_corners, el_normals, el_tri, el_side, el_exposed, n_geo, directions, band, progress)
     parent_geo = _side_normals(n_geo, el_tri, el_side)
@@ -654,22 +634,27 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quant
         else np.zeros(0, bool)
     raw_columns, raw_element = np.unique(pairs[in_raw_group, 1], return_inverse=True)
     raw_element = raw_element.reshape(-1)
-    # Elements in group order, so the run time's (groups, elements) @ (elements, frames) product
-    # reads the frames' rows in sequence.
+    # Elements in group order, so the run time adds a frame's elements to its groups in sequence.
     first_group = np.full(len(raw_columns), n_groups)
     np.minimum.at(first_group, raw_element, pairs[in_raw_group, 0])
     order = np.argsort(first_group, kind="stable")
     rank = np.empty_like(order)
     rank[order] = np.arange(len(order))
     raw_columns, raw_element = raw_columns[order], rank[raw_element]
-    raw_area = sparse.csr_matrix((pair_area[in_raw_group].astype(np.float32),
+    raw_area = sparse.csc_matrix((pair_area[in_raw_group].astype(np.float32),
                                   (pairs[in_raw_group, 0], raw_element)),
                                  shape=(n_groups, len(raw_columns)))
-    raw_bits = np.packbits(visibility[:, raw_columns].astype(bool), axis=1)
+    raw_area.sort_indices()
+    raw_geo = parent_geo[raw_columns]
+    # Bits are cleared for directions further below an element's plane than the horizon band
+    # (_visibility leaves them set for the cosine gate): an element facing well away from the
+    # Sun or the observer then has no bit set around it, and the run time passes over it.
+    above = directions @ raw_geo.T > -band
+    raw_bits = _bitkernel.pack_words(visibility[:, raw_columns].astype(bool) & above)
     return _Pose(normal_shade.astype(np.float32), class_sum, normal_geo.astype(np.float32),
                  area_exposed.astype(np.float32), factors, group_sum, raw_bits, len(raw_columns), raw_area,
                  el_corners[raw_columns].astype(np.float32) if len(raw_columns) else np.zeros((0, 3, 3), np.float32),
-                 parent_geo[raw_columns].astype(np.float32) if len(raw_columns) else np.zeros((0, 3), np.float32),
+                 raw_geo.astype(np.float32) if len(raw_columns) else np.zeros((0, 3), np.float32),
                  mesh.vertices_m.astype(np.float32), _ray_offset_m(mesh), n_groups + len(pairs), len(pairs), n_rays,
                  blocks)
 
