@@ -46,7 +46,7 @@ import weakref
 
 import numpy as np
 
-from raycast import _bitkernel
+from raycast import _kernels
 from raycast.direct import _check_directions, _open3d_scene, sun_disk_directions, sun_samples_for
 from raycast.scene import Scene
 
@@ -172,11 +172,13 @@ class _Pose:
     """Elements of one articulation pose."""
 
     normal_shade: np.ndarray    # (g, 3) float32 area-weighted mean shading normal per group
-    class_sum: object           # (c, g) sparse float32: sums group weights into their shading class
+    group_class: np.ndarray     # (g,) int32: each group's shading class
+    n_classes: int
     normal_geo: np.ndarray      # (g, 3) float32 per group
     area_exposed: np.ndarray    # (g,) float32 merged area of exposed elements
     factors: np.ndarray         # (d, r) float32 visibility factors, direction-major (see _visibility_factors)
-    group_sum: object           # (g, r) sparse float32: sums factor-column products into groups
+    factor_starts: np.ndarray   # (k,) int64: first factor column of each factorised group
+    factor_groups: np.ndarray   # (k,) int64: and that group
     raw_bits: np.ndarray        # (d, ceil(e / 64)) uint64: visibility bits of elements not factorised
     raw_count: int              # e, elements held as bits
     raw_area: object            # (g, e) CSC float32: area of each element's pieces in each group
@@ -187,7 +189,7 @@ class _Pose:
     n_elements: int
     n_occludable: int           # occludable elements before factorisation
     n_rays: int
-    material_blocks: tuple      # (material, first class, end class) per material
+    material_blocks: tuple      # (material, first class, end class) per material, classes in order
 
 
 @dataclass(frozen=True, eq=False)
@@ -304,48 +306,44 @@ class SceneCache:
         return (1.0 - t) * low + t * high
 
     def _pose_intensity(self, pose, sun, obs):
-        # Arrays are (groups or classes, frames): the sparse sums below then run over
-        # contiguous rows of frames.
+        # Arrays are (frames, groups or classes): the compiled loops (raycast._kernels) run
+        # over one frame's groups at a time.
         m = len(sun)
         sun32, obs32 = sun.astype(np.float32), obs.astype(np.float32)
-        weight = np.repeat(pose.area_exposed[:, None], m, axis=1)
+        weight = np.repeat(pose.area_exposed[None, :], m, axis=0)
         if pose.factors.shape[1]:
             product = _interpolation_matrix(sun, self.grid_size, len(pose.factors)) @ pose.factors
             product *= _interpolation_matrix(obs, self.grid_size, len(pose.factors)) @ pose.factors
-            weight += pose.group_sum @ product.T
+            weight[:, pose.factor_groups] += np.add.reduceat(product, pose.factor_starts, axis=1)
         if pose.raw_count:
             for begin in range(0, m, _RAW_FRAMES_PER_CHUNK):
                 sl = slice(begin, begin + _RAW_FRAMES_PER_CHUNK)
-                weight[:, sl] += _bit_weight(pose, sun[sl], obs[sl], self.grid_size,
-                                             _subpoint_weights(self.edge_rays_per_side))
-        # A lit-and-seen area is never negative; the factors' float32 rounding can make it -1e-7.
-        np.maximum(weight, np.float32(0.0), out=weight)
-        cos_geo_o = pose.normal_geo @ obs32.T
-        cos_geo_s = pose.normal_geo @ sun32.T
-        weight *= np.where((cos_geo_o > 0.0) & (cos_geo_s > 0.0), cos_geo_o, np.float32(0.0))
-        # (c, m): each shading class's lit, seen and projected area, and the mean shading normal
-        # of its groups weighted by that area in each frame (so a class shared by faces that
-        # are gated or shadowed differently is shaded where its light comes from).
-        normal = np.stack([pose.class_sum @ (weight * pose.normal_shade[:, k, None]) for k in range(3)])
-        weight = pose.class_sum @ weight
-        normal /= np.maximum(np.sqrt(np.einsum("kcm,kcm->cm", normal, normal)), np.float32(1e-30))
+                _add_bit_weight(weight[sl], pose, sun[sl], obs[sl], self.grid_size,
+                                _subpoint_weights(self.edge_rays_per_side))
+        # (m, c): each shading class's lit, seen and projected area (a lit-and-seen area is
+        # never negative; the factors' float32 rounding can make it -1e-7), and the mean shading
+        # normal of its groups weighted by that area in each frame (so a class shared by faces
+        # that are gated or shadowed differently is shaded where its light comes from).
+        area, normal = _kernels.class_sums(weight, pose.normal_geo, pose.normal_shade, pose.group_class, sun32,
+                                           obs32, pose.n_classes)
         total = np.zeros(m)
-        # One BRDF evaluation per material block, on (classes, frames) arrays of cosines.
+        # One BRDF evaluation per material, on the (class, frame) pairs with light.
         for material, begin, end in pose.material_blocks:
-            frames = np.flatnonzero(weight[begin:end].any(axis=0))
-            if len(frames) == 0:
+            frames, classes = np.nonzero(area[:, begin:end])
+            if len(classes) == 0:
                 continue
-            block = weight[begin:end, frames]
-            n_block = normal[:, begin:end, frames]
-            cos_o = np.einsum("kcm,mk->cm", n_block, obs32[frames])
-            disk, disk_weights = sun_disk_directions(sun[frames], self.sun_samples[material])
-            shading = np.zeros(block.shape, dtype=np.float32)
+            classes += begin
+            n = normal[frames, classes]
+            n /= np.linalg.norm(n, axis=1, keepdims=True)
+            cos_o = np.einsum("pk,pk->p", n, obs32[frames])
+            disk, disk_weights = sun_disk_directions(sun, self.sun_samples[material])
+            shading = np.zeros(len(classes), dtype=np.float32)
             for sun_dir, disk_weight in zip(disk.astype(np.float32), disk_weights):
-                cos_s = np.einsum("kcm,mk->cm", n_block, sun_dir)
-                cos_so = np.einsum("ij,ij->i", sun_dir, obs32[frames])[None, :]
+                cos_s = np.einsum("pk,pk->p", n, sun_dir[frames])
+                cos_so = np.einsum("mk,mk->m", sun_dir, obs32)[frames]
                 shading += (np.float32(disk_weight) * self.scene.brdfs[material].shade(cos_s, cos_o, cos_so)
                             * np.maximum(cos_s, np.float32(0.0)))
-            total[frames] += np.einsum("cm,cm->m", block, shading, dtype=np.float64)
+            total += np.bincount(frames, weights=area[frames, classes] * shading, minlength=m)
         return total
 
     @property
@@ -431,8 +429,8 @@ def _ray_offset_m(mesh):
     return 1e-4 * max(mesh.radius_m, 1.0)
 
 
-def _bit_weight(pose, sun, obs, grid_size, edge_weights):
-    """(g, m) float32: the bit-held elements' lit-and-seen area per group.
+def _add_bit_weight(out, pose, sun, obs, grid_size, edge_weights):
+    """Add the bit-held elements' lit-and-seen area per group to ``out`` (m, g) float32.
 
     Where an element's bits at the four grid nodes around the Sun and the four around the
     observer are all set (98% of visible pairs on COSMOS 2502) it counts whole; where they
@@ -440,28 +438,19 @@ def _bit_weight(pose, sun, obs, grid_size, edge_weights):
     would smear it: rays toward the exact direction decide, from the element's points at the
     barycentric ``edge_weights`` (k, 3), and the element counts by the fraction of them both
     lit and seen (as the direct renderer's shadow rays). Elements facing away from the exact
-    Sun or observer get no rays. The word-wide loops are compiled (raycast._bitkernel).
+    Sun or observer get no rays. The word-wide loops are compiled (raycast._kernels).
     """
     area = pose.raw_area
     sun32, obs32 = np.ascontiguousarray(sun, dtype=np.float32), np.ascontiguousarray(obs, dtype=np.float32)
     sun_nodes, obs_nodes = (cube_grid_weights(d, grid_size)[0].astype(np.int64) for d in (sun, obs))
-    out, frame, element, need = _bitkernel.agreed_weight(
-        pose.raw_bits, sun_nodes, obs_nodes, sun32, obs32, pose.raw_normals, area.indptr, area.indices,
-        area.data, area.shape[0])
+    frame, element, need = _kernels.agreed_weight(out, pose.raw_bits, sun_nodes, obs_nodes, sun32, obs32,
+                                                  pose.raw_normals, area.indptr, area.indices, area.data)
     if len(frame):
         origins = _ray_origins(pose, edge_weights)
-        open_both = np.ones((len(frame), len(edge_weights)), dtype=bool)
-        for flag, directions in ((1, sun32), (2, obs32)):
-            cast = np.flatnonzero(need & flag)
-            if len(cast):
-                rays = np.empty((len(cast), len(edge_weights), 6), dtype=np.float32)
-                rays[:, :, :3] = origins[element[cast]]
-                rays[:, :, 3:] = directions[frame[cast]][:, None, :]
-                occluded = _raycaster(pose).test_occlusions(rays.reshape(-1, 6)).numpy().astype(bool)
-                open_both[cast] &= ~occluded.reshape(len(cast), len(edge_weights))
-        _bitkernel.add_pairs(out, frame, element, open_both.mean(axis=1, dtype=np.float32), area.indptr,
-                             area.indices, area.data)
-    return out.T
+        rays = _kernels.pair_rays(need, frame, element, origins, sun32, obs32)
+        occluded = _raycaster(pose).test_occlusions(rays).numpy()
+        _kernels.add_pairs(out, frame, element, _kernels.open_fraction(need, occluded, len(edge_weights)),
+                           area.indptr, area.indices, area.data)
 
 
 def _interpolation_matrix(directions, grid_size, n_directions):
@@ -621,13 +610,8 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quant
     # Classes are numbered in material order (material leads their key): one block each.
     bounds = np.flatnonzero(np.r_[True, np.diff(class_material) != 0, True])
     blocks = tuple((int(class_material[a]), int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:]))
-    class_sum = sparse.csr_matrix((np.ones(n_groups, dtype=np.float32), (group_class, np.arange(n_groups))),
-                                  shape=(n_classes, n_groups))
 
     factor_groups = pairs[starts[factorised], 0] if len(pairs) else np.zeros(0, int)
-    column_group = np.repeat(factor_groups, np.diff(np.r_[factor_starts, factors.shape[1]]).astype(int))
-    group_sum = sparse.csr_matrix((np.ones(len(column_group), dtype=np.float32),
-                                   (column_group, np.arange(len(column_group)))), shape=(n_groups, len(column_group)))
     # The other groups keep their elements' visibility as bits, and each (group, element)
     # pair's area: an (elements, groups) sparse matrix.
     in_raw_group = np.repeat(~factorised, np.diff(np.r_[starts, len(pairs)]).astype(int)) if len(pairs) \
@@ -650,9 +634,11 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quant
     # (_visibility leaves them set for the cosine gate): an element facing well away from the
     # Sun or the observer then has no bit set around it, and the run time passes over it.
     above = directions @ raw_geo.T > -band
-    raw_bits = _bitkernel.pack_words(visibility[:, raw_columns].astype(bool) & above)
-    return _Pose(normal_shade.astype(np.float32), class_sum, normal_geo.astype(np.float32),
-                 area_exposed.astype(np.float32), factors, group_sum, raw_bits, len(raw_columns), raw_area,
+    raw_bits = _kernels.pack_words(visibility[:, raw_columns].astype(bool) & above)
+    return _Pose(normal_shade.astype(np.float32), group_class.astype(np.int32), n_classes,
+                 normal_geo.astype(np.float32), area_exposed.astype(np.float32), factors,
+                 np.asarray(factor_starts, dtype=np.int64), factor_groups.astype(np.int64), raw_bits, len(raw_columns),
+                 raw_area,
                  el_corners[raw_columns].astype(np.float32) if len(raw_columns) else np.zeros((0, 3, 3), np.float32),
                  raw_geo.astype(np.float32) if len(raw_columns) else np.zeros((0, 3), np.float32),
                  mesh.vertices_m.astype(np.float32), _ray_offset_m(mesh), n_groups + len(pairs), len(pairs), n_rays,

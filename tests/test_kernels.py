@@ -3,7 +3,7 @@
 import numpy as np
 from scipy import sparse
 
-from raycast import _bitkernel
+from raycast import _kernels
 
 
 def _case(seed, n_elements, n_frames, n_directions=40, n_groups=7, density=0.7):
@@ -38,9 +38,12 @@ def _numpy_reference(bits, sun_nodes, obs_nodes, sun, obs, normals, area):
 
 
 def _run(case):
+    """(m, g) agreed area and the mixed pairs, from the compiled loop."""
     bits, sun_nodes, obs_nodes, sun, obs, normals, area = case
-    return _bitkernel.agreed_weight(_bitkernel.pack_words(bits), sun_nodes, obs_nodes, sun, obs, normals,
-                                    area.indptr, area.indices, area.data, area.shape[0])
+    out = np.zeros((len(sun), area.shape[0]), dtype=np.float32)
+    pairs = _kernels.agreed_weight(out, _kernels.pack_words(bits), sun_nodes, obs_nodes, sun, obs, normals,
+                                   area.indptr, area.indices, area.data)
+    return (out, *pairs)
 
 
 def test_agreed_area_and_mixed_pairs_match_numpy():
@@ -57,13 +60,16 @@ def test_agreed_area_and_mixed_pairs_match_numpy():
     assert set(np.unique(need)) == {1, 2, 3}
 
 
-def test_mixed_pairs_beyond_the_first_guess_are_all_returned():
+def test_mixed_pairs_beyond_the_first_guess_are_all_returned_and_nothing_added_twice():
     # Dense half-set bits: far more mixed pairs than the first guess (4096) holds.
     case = _case(2, n_elements=1000, n_frames=60, density=0.5)
-    _, frames, elements, _ = _run(case)
-    _, ref_frames, _, _ = _numpy_reference(*case)
+    out, frames, elements, _ = _run(case)
+    ref_out, ref_frames, ref_elements, _ = _numpy_reference(*case)
     assert len(ref_frames) > 4096
-    assert len(frames) == len(ref_frames)
+    order = np.lexsort((elements, frames))
+    np.testing.assert_array_equal(frames[order], ref_frames)
+    np.testing.assert_array_equal(elements[order], ref_elements)
+    np.testing.assert_allclose(out, ref_out, rtol=1e-5)
 
 
 def test_pairs_add_their_value_times_area_to_each_group():
@@ -72,9 +78,43 @@ def test_pairs_add_their_value_times_area_to_each_group():
     out = np.zeros((5, area.shape[0]), dtype=np.float32)
     frames, elements = np.array([0, 0, 4]), np.array([3, 69, 3])
     values = np.array([0.5, 1.0, 0.25], dtype=np.float32)
-    _bitkernel.add_pairs(out, frames, elements, values, area.indptr, area.indices, area.data)
+    _kernels.add_pairs(out, frames, elements, values, area.indptr, area.indices, area.data)
     dense = area.toarray()
     expected = np.zeros_like(out)
     for f, e, v in zip(frames, elements, values):
         expected[f] += v * dense[:, e]
     np.testing.assert_allclose(out, expected, rtol=1e-6)
+
+
+def test_rays_and_open_fractions_follow_the_pairs_needs():
+    origins = np.arange(4 * 2 * 3, dtype=np.float32).reshape(4, 2, 3)   # 4 elements, 2 points each
+    sun = np.array([[1, 0, 0], [0, 1, 0]], dtype=np.float32)
+    obs = np.array([[0, 0, 1], [0, -1, 0]], dtype=np.float32)
+    need = np.array([1, 2, 3], dtype=np.uint8)
+    frames, elements = np.array([0, 1, 1]), np.array([3, 0, 2])
+    rays = _kernels.pair_rays(need, frames, elements, origins, sun, obs)
+    # Toward the Sun: pairs 0 and 2; then toward the observer: pairs 1 and 2; two points each.
+    expected = [(3, sun[0]), (3, sun[0]), (2, sun[1]), (2, sun[1]), (0, obs[1]), (0, obs[1]), (2, obs[1]), (2, obs[1])]
+    point = [0, 1] * 4
+    for row, ((e, d), j) in enumerate(zip(expected, point)):
+        np.testing.assert_array_equal(rays[row, :3], origins[e, j])
+        np.testing.assert_array_equal(rays[row, 3:], d)
+    occluded = np.array([True, False, False, False, False, True, True, True])
+    np.testing.assert_allclose(_kernels.open_fraction(need, occluded, 2), [0.5, 0.5, 0.0])
+
+
+def test_class_sums_gate_and_weight_by_the_geometric_normal():
+    rng = np.random.default_rng(4)
+    n_groups, m, n_classes = 30, 12, 5
+    weight = rng.normal(size=(n_groups, m)).astype(np.float32)   # some negative: counted as zero
+    unit = lambda a: (a / np.linalg.norm(a, axis=1, keepdims=True)).astype(np.float32)
+    normal_geo, normal_shade = unit(rng.normal(size=(n_groups, 3))), unit(rng.normal(size=(n_groups, 3)))
+    group_class = rng.integers(0, n_classes, n_groups).astype(np.int32)
+    sun, obs = unit(rng.normal(size=(m, 3))), unit(rng.normal(size=(m, 3)))
+    area, normal = _kernels.class_sums(np.ascontiguousarray(weight.T), normal_geo, normal_shade, group_class, sun, obs, n_classes)
+    cos_o, cos_s = normal_geo @ obs.T, normal_geo @ sun.T
+    gated = np.maximum(weight, 0.0) * np.where((cos_o > 0) & (cos_s > 0), cos_o, 0.0)
+    one_hot = np.eye(n_classes)[group_class].T                      # (c, g)
+    np.testing.assert_allclose(area, (one_hot @ gated).T, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(normal, np.einsum("cg,gm,gk->mck", one_hot, gated, normal_shade), rtol=1e-5, atol=1e-6)
+    assert (area > 0).sum() > 5
