@@ -237,7 +237,8 @@ def time_at_error(rows, error_mag, key="cpu_s"):
 
 def verdict(rows, method, target_mag, target_s):
     """One sentence: does ``method`` meet its target, and how much faster than Cycles at equal accuracy."""
-    mine = [r for r in rows if r["method"] == method]
+    # "direct" covers both of its samplings ("direct" adaptive, "direct-grid").
+    mine = [r for r in rows if r["method"].split("-")[0] == method]
     cycles = [r for r in rows if r["method"] == "cycles"]
     met = [r for r in mine if r["error_mag"] <= target_mag]
     if not met:
@@ -245,7 +246,7 @@ def verdict(rows, method, target_mag, target_s):
         return (f"{method} MISSES {target_mag} mag at every setting (best {best['error_mag']:.4f} mag at "
                 f"{best['cpu_s']:.3f} s CPU)")
     best = min(met, key=lambda r: r["cpu_s"])
-    text = (f"{method} {best['setting']}: {best['error_mag']:.4f} mag in {1e3 * best['cpu_s']:.1f} ms CPU "
+    text = (f"{best['method']} {best['setting']}: {best['error_mag']:.4f} mag in {1e3 * best['cpu_s']:.1f} ms CPU "
             f"({1e3 * best['wall_s']:.1f} ms wall; {'meets' if best['cpu_s'] <= target_s else 'MISSES'} "
             f"{target_s:g} s at {target_mag} mag)")
     if cycles:

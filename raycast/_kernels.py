@@ -204,3 +204,85 @@ def open_fraction(need, occluded, k):
     for i in range(n):
         fraction[i] = is_open[i].sum() / k
     return fraction
+
+
+# ---------------------------------------------------------------- direct renderer
+
+
+@njit(cache=True, nogil=True)
+def tile_rays(tile_origin, owner, step_u, step_v, backward, tile):
+    """(k tile**2, 6) float32 orthographic rays of k tiles: pixel (i, j) of tile n starts at
+    ``tile_origin[n] + i step_u[f] + j step_v[f]`` and runs along ``backward[f]``, f = owner[n]."""
+    rays = np.empty((len(owner) * tile * tile, 6), dtype=np.float32)
+    row = 0
+    for n in range(len(owner)):
+        f = owner[n]
+        for i in range(tile):
+            for j in range(tile):
+                for x in range(3):
+                    rays[row, x] = tile_origin[n, x] + i * step_u[f, x] + j * step_v[f, x]
+                    rays[row, 3 + x] = backward[f, x]
+                row += 1
+    return rays
+
+
+@njit(cache=True, nogil=True)
+def hit_points(rays, t_hit, hit):
+    """(h, 3) float32 points where the rays ``hit`` (indices) end."""
+    points = np.empty((len(hit), 3), dtype=np.float32)
+    for n in range(len(hit)):
+        r = hit[n]
+        for x in range(3):
+            points[n, x] = rays[r, x] + t_hit[r] * rays[r, 3 + x]
+    return points
+
+
+@njit(cache=True, nogil=True)
+def sunward_hits(frames, prim, points, face_normals, sun, obs, offset):
+    """Hits on a face turned toward the Sun, and their shadow rays.
+
+    The face normal is turned toward the observer (either side of a face may be seen).
+
+    Returns
+    -------
+    normals : (h, 3) float64 face normals, turned toward the observer.
+    lit : (k,) int64, hits whose turned normal faces the Sun.
+    rays : (k, 6) float32 shadow rays from ``offset`` above each toward the Sun.
+    """
+    n_hits = len(frames)
+    normals = np.empty((n_hits, 3))
+    lit = np.empty(n_hits, dtype=np.int64)
+    count = 0
+    for n in range(n_hits):
+        f, t = frames[n], prim[n]
+        nx, ny, nz = face_normals[t, 0], face_normals[t, 1], face_normals[t, 2]
+        if nx * obs[f, 0] + ny * obs[f, 1] + nz * obs[f, 2] < 0.0:
+            nx, ny, nz = -nx, -ny, -nz
+        normals[n, 0], normals[n, 1], normals[n, 2] = nx, ny, nz
+        if nx * sun[f, 0] + ny * sun[f, 1] + nz * sun[f, 2] > 0.0:
+            lit[count] = n
+            count += 1
+    rays = np.empty((count, 6), dtype=np.float32)
+    for k in range(count):
+        n, f = lit[k], frames[lit[k]]
+        for x in range(3):
+            rays[k, x] = points[n, x] + offset * normals[n, x]
+            rays[k, 3 + x] = sun[f, x]
+    return normals, lit[:count], rays
+
+
+@njit(cache=True, nogil=True)
+def interpolated_normals(normals, rows, prim, uv, corner_normals):
+    """Replace ``normals[rows]`` by the barycentric mix of their triangle's corner normals,
+    normalised and turned to the side of the normal it replaces (in place)."""
+    for n in rows:
+        t = prim[n]
+        a, b = uv[n, 0], uv[n, 1]
+        c = 1.0 - a - b
+        x = c * corner_normals[t, 0, 0] + a * corner_normals[t, 1, 0] + b * corner_normals[t, 2, 0]
+        y = c * corner_normals[t, 0, 1] + a * corner_normals[t, 1, 1] + b * corner_normals[t, 2, 1]
+        z = c * corner_normals[t, 0, 2] + a * corner_normals[t, 1, 2] + b * corner_normals[t, 2, 2]
+        norm = np.sqrt(x * x + y * y + z * z)
+        if x * normals[n, 0] + y * normals[n, 1] + z * normals[n, 2] < 0.0:
+            norm = -norm
+        normals[n, 0], normals[n, 1], normals[n, 2] = x / norm, y / norm, z / norm

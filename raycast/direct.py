@@ -31,6 +31,7 @@ import math
 
 import numpy as np
 
+from raycast import _kernels
 from raycast.scene import Scene
 
 __all__ = ["DirectRenderer", "SAMPLINGS", "SUN_RADIUS_RAD", "sun_disk_directions", "orthonormal_basis"]
@@ -247,23 +248,16 @@ class DirectRenderer:
         base = (center + (start_u + 0.5 * h)[:, None] * u + (start_v + 0.5 * h)[:, None] * v
                 + (radius + 1.0) * obs_body)
         step_u, step_v = h * u, h * v
-        # Ray origin of each tile's first pixel, and the pixel pattern within a tile.
+        # Ray origin of each tile's first pixel (raycast._kernels.tile_rays steps across the tile).
         tile_origin = (base[tile_frame] + (_TILE * tile_iu)[:, None] * step_u[tile_frame]
                        + (_TILE * tile_iv)[:, None] * step_v[tile_frame]).astype(np.float32)
-        pattern_u, pattern_v = np.meshgrid(np.arange(_TILE), np.arange(_TILE), indexing="ij")
-        pattern_u = pattern_u.reshape(-1).astype(np.float32)
-        pattern_v = pattern_v.reshape(-1).astype(np.float32)
         step_u32, step_v32 = step_u.astype(np.float32), step_v.astype(np.float32)
         backward = (-obs_body).astype(np.float32)
         tiles_per_batch = max(1, _MAX_RAYS_PER_BATCH // _TILE ** 2)
         for begin in range(0, len(tile_frame), tiles_per_batch):
             sl = slice(begin, begin + tiles_per_batch)
             owner = tile_frame[sl]
-            rays = np.empty((len(owner), _TILE ** 2, 6), dtype=np.float32)
-            rays[:, :, :3] = (tile_origin[sl, None, :] + pattern_u[None, :, None] * step_u32[owner][:, None, :]
-                              + pattern_v[None, :, None] * step_v32[owner][:, None, :])
-            rays[:, :, 3:] = backward[owner][:, None, :]
-            rays = rays.reshape(-1, 6)
+            rays = _kernels.tile_rays(tile_origin[sl], owner, step_u32, step_v32, backward, _TILE)
             frames = np.repeat(owner, _TILE ** 2)
             hits = scene.cast_rays(rays)
             t_hit = hits["t_hit"].numpy()
@@ -273,7 +267,7 @@ class DirectRenderer:
             frames = frames[hit]
             prim = hits["primitive_ids"].numpy()[hit].astype(np.int64)
             uv = hits["primitive_uvs"].numpy()[hit]
-            points = rays[hit, :3] + t_hit[hit, None] * rays[hit, 3:]
+            points = _kernels.hit_points(rays, t_hit, hit)
             contribution, _ = self._shade(mesh, scene, frames, prim, uv, points, sun_body, obs_body)
             result += np.bincount(frames, weights=contribution, minlength=len(result))
         return result * h * h
@@ -295,54 +289,38 @@ class DirectRenderer:
         """Per-hit f cos V, averaged over the Sun samples, and whether the Sun reaches the hit;
         two arrays of shape (hits,). ``flat_table`` (:meth:`_flat_radiance` of these frames)
         gives flat-shaded hits their radiance by look-up."""
-        wo = obs_body[frames]
-        n_geo = mesh.face_normals[prim]
-        facing = np.where(np.einsum("ij,ij->i", n_geo, wo) < 0.0, -1.0, 1.0)
-        n_geo *= facing[:, None]
-        offset = np.float32(1e-4 * max(mesh.radius_m, 1.0))
-        wi_all = sun_body[frames]
-        lit = np.flatnonzero(np.einsum("ij,ij->i", n_geo, wi_all) > 0.0)
         total = np.zeros(len(frames))
         reached = np.zeros(len(frames), dtype=bool)
+        normals, lit, rays = _kernels.sunward_hits(frames, prim, points, mesh.face_normals, sun_body, obs_body,
+                                                   1e-4 * max(mesh.radius_m, 1.0))
         if len(lit) == 0:
             return total, reached
-        rays = np.empty((len(lit), 6), dtype=np.float32)
-        rays[:, :3] = points[lit] + offset * n_geo[lit]
-        rays[:, 3:] = wi_all[lit]
         lit = lit[~scene.test_occlusions(rays).numpy()]
         reached[lit] = True
         smooth = self._state["smooth"][prim[lit]]
         if flat_table is not None:
-            total[lit[~smooth]] = flat_table[frames[lit[~smooth]], prim[lit[~smooth]]]
-            lit = lit[smooth]
-            smooth = smooth[smooth]
+            flat = lit[~smooth]
+            total[flat] = flat_table[frames[flat], prim[flat]]
+            lit, smooth = lit[smooth], smooth[smooth]
         # Only smooth-shaded triangles need the barycentric interpolation of corner normals.
-        n_shade = n_geo[lit]
-        if smooth.any():
-            rows = np.flatnonzero(smooth)
-            hit = lit[rows]
-            a, b = uv[hit, 0, None], uv[hit, 1, None]
-            corner = mesh.corner_normals[prim[hit]]
-            interp = (1.0 - a - b) * corner[:, 0] + a * corner[:, 1] + b * corner[:, 2]
-            interp /= np.linalg.norm(interp, axis=1, keepdims=True)
-            interp *= np.where(np.einsum("ij,ij->i", interp, n_geo[hit]) < 0.0, -1.0, 1.0)[:, None]
-            n_shade[rows] = interp
-        total[lit] = self._radiance(mesh.material_index[prim[lit]], n_shade, wi_all[lit], wo[lit])
+        _kernels.interpolated_normals(normals, lit[smooth], prim, uv, mesh.corner_normals)
+        total[lit] = self._radiance(mesh.material_index[prim[lit]], normals[lit], frames[lit], sun_body, obs_body)
         return total, reached
 
-    def _radiance(self, materials, normals, sun, obs):
-        """f(s, o, n) max(n . s, 0) averaged over the solar disk, (k,) for (k,) materials and
-        (k, 3) shading normals, Sun and observer directions."""
+    def _radiance(self, materials, normals, frames, sun_body, obs_body):
+        """f(s, o, n) max(n . s, 0) averaged over the solar disk, (k,) for (k,) materials,
+        (k, 3) shading normals and (k,) frames of the (m, 3) Sun and observer directions."""
         total = np.zeros(len(materials))
         mesh = self._state["mesh"]
         for material in np.unique(materials):
             idx = np.flatnonzero(materials == material)
-            normal, wo_m = normals[idx], obs[idx]
-            disk, weights = sun_disk_directions(sun[idx], self._state["sun_samples"][material])
-            cos_o = np.einsum("ij,ij->i", normal, wo_m)
+            normal, frame = normals[idx], frames[idx]
+            wo = obs_body[frame]
+            disk, weights = sun_disk_directions(sun_body, self._state["sun_samples"][material])
+            cos_o = np.einsum("ij,ij->i", normal, wo)
             for wi, weight in zip(disk, weights):
-                cos_i = np.einsum("ij,ij->i", normal, wi)
-                value = mesh.brdfs[material].shade(cos_i, cos_o, np.einsum("ij,ij->i", wi, wo_m))
+                cos_i = np.einsum("ij,ij->i", normal, wi[frame])
+                value = mesh.brdfs[material].shade(cos_i, cos_o, np.einsum("ij,ij->i", wi, obs_body)[frame])
                 total[idx] += weight * value * np.maximum(cos_i, 0.0)
         return total
 
@@ -354,10 +332,9 @@ class DirectRenderer:
         normals = np.broadcast_to(mesh.face_normals, (m, t, 3))
         facing = np.where(np.einsum("mtj,mj->mt", normals, obs_body) < 0.0, -1.0, 1.0)
         normals = (normals * facing[..., None]).reshape(-1, 3)
-        sun = np.repeat(sun_body, t, axis=0)
-        obs = np.repeat(obs_body, t, axis=0)
-        table = self._radiance(np.tile(mesh.material_index, m), normals, sun, obs)
-        table[np.einsum("ij,ij->i", normals, sun) <= 0.0] = 0.0
+        frames = np.repeat(np.arange(m), t)
+        table = self._radiance(np.tile(mesh.material_index, m), normals, frames, sun_body, obs_body)
+        table[np.einsum("ij,ij->i", normals, sun_body[frames]) <= 0.0] = 0.0
         return table.reshape(m, t)
 
     def image(self, sun_body, obs_body):
