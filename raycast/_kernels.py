@@ -227,14 +227,29 @@ def tile_rays(tile_origin, owner, step_u, step_v, backward, tile):
 
 
 @njit(cache=True, nogil=True)
-def hit_points(rays, t_hit, hit):
-    """(h, 3) float32 points where the rays ``hit`` (indices) end."""
-    points = np.empty((len(hit), 3), dtype=np.float32)
-    for n in range(len(hit)):
-        r = hit[n]
+def tile_hits(rays, t_hit, prim_ids, uvs, owner, rays_per_tile):
+    """The hits of :func:`tile_rays`' rays: their frames (``owner`` of their tile), triangles,
+    barycentric (u, v) and (h, 3) float32 points."""
+    count = 0
+    for r in range(len(t_hit)):
+        if np.isfinite(t_hit[r]):
+            count += 1
+    frames = np.empty(count, dtype=np.int64)
+    prim = np.empty(count, dtype=np.int64)
+    uv = np.empty((count, 2), dtype=np.float32)
+    points = np.empty((count, 3), dtype=np.float32)
+    n = 0
+    for r in range(len(t_hit)):
+        t = t_hit[r]
+        if not np.isfinite(t):
+            continue
+        frames[n] = owner[r // rays_per_tile]
+        prim[n] = prim_ids[r]
+        uv[n, 0], uv[n, 1] = uvs[r, 0], uvs[r, 1]
         for x in range(3):
-            points[n, x] = rays[r, x] + t_hit[r] * rays[r, 3 + x]
-    return points
+            points[n, x] = rays[r, x] + t * rays[r, 3 + x]
+        n += 1
+    return frames, prim, uv, points
 
 
 @njit(cache=True, nogil=True)

@@ -258,16 +258,11 @@ class DirectRenderer:
             sl = slice(begin, begin + tiles_per_batch)
             owner = tile_frame[sl]
             rays = _kernels.tile_rays(tile_origin[sl], owner, step_u32, step_v32, backward, _TILE)
-            frames = np.repeat(owner, _TILE ** 2)
             hits = scene.cast_rays(rays)
-            t_hit = hits["t_hit"].numpy()
-            hit = np.flatnonzero(np.isfinite(t_hit))
-            if len(hit) == 0:
+            frames, prim, uv, points = _kernels.tile_hits(rays, hits["t_hit"].numpy(), hits["primitive_ids"].numpy(),
+                                                          hits["primitive_uvs"].numpy(), owner, _TILE ** 2)
+            if len(frames) == 0:
                 continue
-            frames = frames[hit]
-            prim = hits["primitive_ids"].numpy()[hit].astype(np.int64)
-            uv = hits["primitive_uvs"].numpy()[hit]
-            points = _kernels.hit_points(rays, t_hit, hit)
             contribution, _ = self._shade(mesh, scene, frames, prim, uv, points, sun_body, obs_body)
             result += np.bincount(frames, weights=contribution, minlength=len(result))
         return result * h * h
