@@ -301,3 +301,36 @@ def interpolated_normals(normals, rows, prim, uv, corner_normals):
         if x * normals[n, 0] + y * normals[n, 1] + z * normals[n, 2] < 0.0:
             norm = -norm
         normals[n, 0], normals[n, 1], normals[n, 2] = x / norm, y / norm, z / norm
+
+
+@njit(cache=True, nogil=True)
+def lattice_rays(base, step_u, step_v, backward, frame, i, j):
+    """(n, 6) float32 rays at lattice points (i, j) of their frames: from
+    ``base[:, f] + i step_u[:, f] + j step_v[:, f]`` along ``backward[:, f]`` ((3, m) tables)."""
+    rays = np.empty((len(frame), 6), dtype=np.float32)
+    for n in range(len(frame)):
+        f = frame[n]
+        for x in range(3):
+            rays[n, x] = base[x, f] + i[n] * step_u[x, f] + j[n] * step_v[x, f]
+            rays[n, 3 + x] = backward[x, f]
+    return rays
+
+
+@njit(cache=True, nogil=True)
+def ray_hits(rays, t_hit):
+    """Indices of the rays that hit (finite ``t_hit``) and their (h, 3) float32 end points."""
+    count = 0
+    for r in range(len(t_hit)):
+        if np.isfinite(t_hit[r]):
+            count += 1
+    hit = np.empty(count, dtype=np.int64)
+    points = np.empty((count, 3), dtype=np.float32)
+    n = 0
+    for r in range(len(t_hit)):
+        t = t_hit[r]
+        if np.isfinite(t):
+            hit[n] = r
+            for x in range(3):
+                points[n, x] = rays[r, x] + t * rays[r, 3 + x]
+            n += 1
+    return hit, points

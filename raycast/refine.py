@@ -33,6 +33,8 @@ import math
 
 import numpy as np
 
+from raycast import _kernels
+
 __all__ = ["surface_classes", "coarse_levels", "EdgeTopology", "AdaptiveSampler"]
 
 _FRAMES_PER_CHUNK = 16
@@ -269,22 +271,15 @@ class AdaptiveSampler:
         """
         sun, obs = self._frame[:2]
         base, step_u, step_v, backward = self._rays
-        # Column by column: gathers from (frames,) tables are several times faster than from
-        # (frames, 3) rows.
-        fi, fj = i.astype(np.float32), j.astype(np.float32)
-        rays = np.empty((len(frame), 6), dtype=np.float32)
-        for c in range(3):
-            rays[:, c] = base[c][frame] + fi * step_u[c][frame] + fj * step_v[c][frame]
-            rays[:, 3 + c] = backward[c][frame]
+        rays = _kernels.lattice_rays(base, step_u, step_v, backward, frame, i.astype(np.float32),
+                                     j.astype(np.float32))
         hits = self.raycaster.cast_rays(rays)
         self.n_rays += len(rays)
-        t_hit = hits["t_hit"].numpy()
-        hit = np.flatnonzero(np.isfinite(t_hit))
+        hit, points = _kernels.ray_hits(rays, hits["t_hit"].numpy())
         cls = np.full(len(frame), -1, dtype=np.int64)
         value = np.zeros(len(frame))
         if len(hit):
             prim = hits["primitive_ids"].numpy()[hit].astype(np.int64)
-            points = rays[hit, :3] + t_hit[hit, None] * rays[hit, 3:]
             value[hit], lit = self.shade(frame[hit], prim, hits["primitive_uvs"].numpy()[hit], points, sun, obs,
                                          self._flat_table)
             cls[hit] = 2 * self.classes[prim] + lit
