@@ -240,11 +240,16 @@ class DirectRenderer:
         n_u = np.floor((pu.max(axis=0) - start_u) / h).astype(np.int64) + 1
         n_v = np.floor((pv.max(axis=0) - start_v) / h).astype(np.int64) + 1
         # Empty-space skipping: the grid is cut into tiles of TILE x TILE pixels and only tiles
-        # touched by some triangle's projected bounding box are cast (the same rays as the full
-        # grid would cast where there is anything to hit).
+        # touched by the projected bounding box of some triangle whose seen side faces the Sun
+        # are cast. A ray elsewhere misses or ends on a side turned away from the Sun, which adds
+        # nothing: the sum is that of the full grid. (On COSMOS 2502 only a sixth of the hits
+        # are on sunward sides.)
         tiles_u = (n_u + _TILE - 1) // _TILE
         tiles_v = (n_v + _TILE - 1) // _TILE
-        tile_frame, tile_iu, tile_iv = _covered_tiles(mesh, pu, pv, start_u, start_v, h * _TILE, tiles_u, tiles_v)
+        cos_o, cos_s = mesh.face_normals @ obs_body.T, mesh.face_normals @ sun_body.T
+        sunward = np.where(cos_o < 0.0, -cos_s, cos_s) > 0.0
+        tile_frame, tile_iu, tile_iv = _covered_tiles(mesh, pu, pv, start_u, start_v, h * _TILE, tiles_u, tiles_v,
+                                                      sunward)
         base = (center + (start_u + 0.5 * h)[:, None] * u + (start_v + 0.5 * h)[:, None] * v
                 + (radius + 1.0) * obs_body)
         step_u, step_v = h * u, h * v
@@ -397,8 +402,8 @@ def sun_samples_for(brdf, accuracy_mag):
     return 7 if relative_effect < 10.0 * tolerance else 24
 
 
-def _covered_tiles(mesh, pu, pv, start_u, start_v, tile_m, tiles_u, tiles_v):
-    """Tiles of each frame's grid touched by a triangle's projected bounding box.
+def _covered_tiles(mesh, pu, pv, start_u, start_v, tile_m, tiles_u, tiles_v, selected):
+    """Tiles of each frame's grid touched by the projected bounding box of a selected triangle.
 
     Parameters
     ----------
@@ -406,6 +411,7 @@ def _covered_tiles(mesh, pu, pv, start_u, start_v, tile_m, tiles_u, tiles_v):
     start_u, start_v : (m,) float, grid origin per frame.
     tile_m : float, tile side.
     tiles_u, tiles_v : (m,) int, tiles per frame along each axis.
+    selected : (t, m) bool, the triangles whose boxes count in each frame.
 
     Returns
     -------
@@ -423,9 +429,9 @@ def _covered_tiles(mesh, pu, pv, start_u, start_v, tile_m, tiles_u, tiles_v):
     lo_v, hi_v = np.clip(lo_v, 0, size_v - 1), np.clip(hi_v + 1, 0, size_v)
     # A 2-D difference array per frame: +1/-1 at the box corners, then cumulative sums.
     cover = np.zeros((m, size_u + 1, size_v + 1), dtype=np.int32)
-    frame = np.broadcast_to(np.arange(m), lo_u.shape)
+    frame = np.broadcast_to(np.arange(m), lo_u.shape)[selected]
     for du, dv, sign in ((lo_u, lo_v, 1), (hi_u, lo_v, -1), (lo_u, hi_v, -1), (hi_u, hi_v, 1)):
-        np.add.at(cover, (frame, du, dv), sign)
+        np.add.at(cover, (frame, du[selected], dv[selected]), sign)
     cover = cover.cumsum(axis=1).cumsum(axis=2)[:, :size_u, :size_v]
     inside = (np.arange(size_u)[None, :, None] < tiles_u[:, None, None]) & \
              (np.arange(size_v)[None, None, :] < tiles_v[:, None, None])

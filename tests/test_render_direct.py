@@ -156,3 +156,33 @@ def test_tilted_shading_normal_keeps_diffuse_light_below_its_horizon(method):
     model = render(scene, geometry(sun, obs), method=method, pixel_size_m=PLATE_PIXEL_M)
     # Direct: edge error of a 2 mm grid on a 1 m plate, < 1e-4 relative; cached: exact sum.
     assert model.intensity_m2_sr[0] == pytest.approx(expected, rel=2e-4)
+
+
+def test_grid_skips_only_tiles_whose_hits_face_away_from_the_sun(monkeypatch):
+    # A bus and a panel lit from behind the observer's side: many tiles hold only faces turned
+    # away from the Sun. Skipping them must leave the sum exactly as the full grid's.
+    from raycast import direct
+
+    panel = Part.box("panel", (3.0, 2.0, 0.05), "cells").transformed(offset_m=(0.0, 0.0, 1.8))
+    scene = Scene.from_parts([Part.box("bus", (1.5, 1.5, 3.0), "paint"), panel],
+                             {"paint": Lambertian(0.6), "cells": GGX(0.5, 0.3)})
+    rng = np.random.default_rng(8)
+    sun, obs = unit(rng.normal(size=(6, 3))), unit(rng.normal(size=(6, 3)))
+    counted = {}
+    covered_tiles = direct._covered_tiles
+
+    def recording(*args, every=False):
+        args = list(args)
+        if every:
+            args[-1] = np.ones_like(args[-1])
+        tiles = covered_tiles(*args)
+        counted["every" if every else "sunward"] = len(tiles[0])
+        return tiles
+
+    monkeypatch.setattr(direct, "_covered_tiles", recording)
+    skipping = DirectRenderer(scene, 0.02, sampling="grid").intensity(sun, obs)
+    monkeypatch.setattr(direct, "_covered_tiles", lambda *args: recording(*args, every=True))
+    full = DirectRenderer(scene, 0.02, sampling="grid").intensity(sun, obs)
+    np.testing.assert_allclose(skipping, full, rtol=1e-12)
+    assert skipping.max() > 0.0
+    assert counted["sunward"] < 0.9 * counted["every"]
