@@ -1,14 +1,19 @@
-"""Compiled loops of the fast path (raycast.cache), where numpy would need (elements, frames) arrays.
+"""Compiled (numba) loops of the renderers, where numpy would need large temporary arrays.
 
-Bit-held elements (raycast.cache._add_bit_weight): their visibility bits are held as
-(directions, words) uint64, element ``e`` at bit ``e % 64`` of word ``e // 64``. For each frame
-the four cube-map nodes around the Sun and the four around the observer are ANDed (visible at
-all of them) and ORed (at any) one word at a time; an element's area is added to its groups
-where all eight agree, and the pairs where they differ are returned for exact rays. Only the
-set bits are read.
+Fast path (raycast.cache):
 
-Shading classes (:func:`class_sums`): the groups' gated areas and shading normals summed into
-their classes in one pass.
+* bit-held elements (``_add_bit_weight``): their visibility bits are held as (directions,
+  words) uint64, element ``e`` at bit ``e % 64`` of word ``e // 64``. For each frame the four
+  cube-map nodes around the Sun and the four around the observer are ANDed (visible at all of
+  them) and ORed (at any) one word at a time; an element's area is added to its groups where
+  all eight agree, and the pairs where they differ are returned for exact rays. Only the set
+  bits are read, where numpy needed an (elements, frames) float array;
+* shading classes (:func:`class_sums`): the groups' gated areas and shading normals summed
+  into their classes in one pass.
+
+Direct renderer (raycast.direct, raycast.refine): ray set-up, hit compaction, sunward hits and
+their shadow rays, smooth-normal interpolation, one pass per batch of rays instead of a dozen
+(n, 3) gathers.
 """
 
 import numpy as np

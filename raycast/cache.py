@@ -38,6 +38,7 @@ What is precomputed
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 import functools
 import math
@@ -353,9 +354,13 @@ class SceneCache:
 
     @property
     def nbytes(self) -> int:
-        """Memory held by the visibility tables and element arrays."""
-        return int(sum(p.factors.nbytes + p.raw_bits.nbytes + p.raw_area.data.nbytes + p.raw_area.indices.nbytes
-                       + p.normal_shade.nbytes + p.normal_geo.nbytes + p.area_exposed.nbytes for p in self.poses))
+        """Memory held by the poses' arrays (visibility tables, elements, ray-casting triangles)."""
+        total = 0
+        for pose in self.poses:
+            total += sum(getattr(pose, f.name).nbytes for f in dataclasses.fields(pose)
+                         if isinstance(getattr(pose, f.name), np.ndarray))
+            total += pose.raw_area.data.nbytes + pose.raw_area.indices.nbytes + pose.raw_area.indptr.nbytes
+        return int(total)
 
 
 def _exposed_sides(vertices, corners, normals, tolerance):
