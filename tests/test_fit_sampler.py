@@ -203,3 +203,28 @@ def test_population_start_never_puts_two_walkers_at_one_point(monkeypatch):
     evaluator = sampler._Evaluator(posterior, posterior, None)
     positions, _ = sampler.init_from_population(posterior, settings, np.random.default_rng(3), evaluator)
     assert len(np.unique(positions, axis=0)) == settings.n_walkers
+
+
+def test_autocorrelation_time_ignores_walkers_that_never_moved():
+    import warnings
+
+    from emcee.autocorr import integrated_time
+
+    from rsodb.fit.sampler import autocorr_time
+
+    rng = np.random.default_rng(3)
+    # AR(1) walkers with phi = 0.8: integrated time (1 + phi) / (1 - phi) = 9 steps.
+    steps, walkers = 4000, 12
+    chain = np.zeros((steps, walkers, 2))
+    noise = rng.normal(size=(steps, walkers, 2))
+    for t in range(1, steps):
+        chain[t] = 0.8 * chain[t - 1] + noise[t]
+    expected = integrated_time(chain[:, 1:], tol=0)
+    chain[:, 0, 0] = 1.5          # one walker stuck in the first parameter
+    chain[:, :, 1][:, 3] = -2.0   # another stuck in the second
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")   # emcee alone divides by the stuck walker's zero variance
+        tau = autocorr_time(chain)
+    assert np.all(np.abs(tau - 9.0) < 2.0)
+    np.testing.assert_allclose(tau[0], expected[0], rtol=1e-12)
+    assert np.isnan(autocorr_time(np.ones((50, 4, 1))))[0]

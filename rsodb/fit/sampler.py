@@ -140,8 +140,8 @@ class ChainRun:
         Log posterior at those positions.
     acceptance_fraction : (n_walkers,) float
     autocorr_time : (ndim,) float
-        Integrated autocorrelation time per parameter, in steps (emcee's estimate with
-        ``tol=0``; unreliable when the chain is shorter than ~50 of them).
+        Integrated autocorrelation time per parameter, in steps (:func:`autocorr_time`;
+        unreliable when the chain is shorter than ~50 of them).
     resumed_from : int
         Steps already in the file when this call started (0 for a fresh run).
     steps_run : int
@@ -505,7 +505,6 @@ def run_sampler(posterior, settings: SamplerSettings, chain_path: str | Path, *,
     """
     import emcee
     import h5py
-    from emcee.autocorr import integrated_time
     from tqdm.auto import tqdm
 
     space = posterior.space
@@ -561,6 +560,25 @@ def run_sampler(posterior, settings: SamplerSettings, chain_path: str | Path, *,
     elapsed = time.perf_counter() - started
 
     chain, log_prob, acceptance = read_chain(chain_path)
-    autocorr = integrated_time(chain, tol=0) if chain.shape[0] > 1 else np.full(space.ndim, np.nan)
-    return ChainRun(space.names, chain, log_prob, acceptance, np.asarray(autocorr, dtype=float), stored,
+    return ChainRun(space.names, chain, log_prob, acceptance, autocorr_time(chain), stored,
                     remaining, elapsed, init_info, str(chain_path))
+
+
+def autocorr_time(chain):
+    """(ndim,) integrated autocorrelation time per parameter of a (steps, walkers, ndim) chain.
+
+    emcee's estimate (``tol=0``) over the walkers that moved in that parameter: a walker that
+    never accepted a step has no autocorrelation (emcee would divide by its zero variance and
+    return NaN for the whole parameter). NaN where no walker moved or the chain has one step.
+    """
+    from emcee.autocorr import integrated_time
+
+    steps, _, ndim = chain.shape
+    tau = np.full(ndim, np.nan)
+    if steps < 2:
+        return tau
+    for d in range(ndim):
+        moved = np.ptp(chain[:, :, d], axis=0) > 0.0
+        if moved.any():
+            tau[d] = integrated_time(chain[:, moved, d:d + 1], tol=0)[0]
+    return tau
