@@ -264,7 +264,7 @@ class FitResult:
         config : mapping, optional
             The fit configuration, stored for provenance.
         """
-        from emcee.autocorr import integrated_time
+        from rsodb.fit.sampler import autocorr_time
 
         space = posterior.space
         n_steps = run.n_steps
@@ -276,7 +276,7 @@ class FitResult:
         p16, median, p84 = np.percentile(flat, [16, 50, 84], axis=0)
         median_wrapped = space.wrap(median)
         shift = median_wrapped - median
-        tau = integrated_time(kept, tol=0) if kept.shape[0] > 1 else np.full(space.ndim, np.nan)
+        tau = autocorr_time(kept)
 
         best_index = np.unravel_index(np.argmax(run.log_prob), run.log_prob.shape)
         best = space.wrap(run.chain[best_index])
