@@ -62,7 +62,7 @@ _FACTOR_MIN_ELEMENTS = 4
 _MERGE_FRACTION = 3.0
 # Lobes whose share of the reflectance is at most this are weak (see _normal_step_rad).
 _WEAK_LOBE_SHARE = 0.2
-# Frames per batch when expanding bit-held visibility (bounds the (frames, elements) arrays).
+# Frames per batch of the bit-held elements' loop (bounds its buffer of pairs for exact rays).
 _RAW_FRAMES_PER_CHUNK = 256
 # An element is cut in four where its quarters see differently in more than this fraction of
 # its upper-hemisphere directions (see _split_where_partly_visible).
