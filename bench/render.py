@@ -18,7 +18,8 @@ Output: a speed-vs-accuracy chart (docs/img/render_speed_accuracy.png) and a dat
 appended to docs/benchmarks.md. The machine is shared: wall times are under load from other
 jobs; CPU times of this process are printed beside them.
 
-Run: ``python bench/render.py`` (add ``--no-cycles`` to skip Blender, ``--quick`` for a smoke run).
+Run: ``python bench/render.py`` (add ``--no-cycles`` to skip Blender, ``--quick`` for a smoke run,
+``--chart-only`` to redraw the chart from the last recorded run).
 """
 from __future__ import annotations
 
@@ -175,7 +176,7 @@ def chart(results, path):
     import matplotlib.pyplot as plt
 
     models = sorted({r["model"] for r in results if r["frames"] == 150})
-    fig, axes = plt.subplots(1, len(models), figsize=(6 * len(models), 4.8), squeeze=False)
+    fig, axes = plt.subplots(1, len(models), figsize=(6 * len(models), 5.4), squeeze=False)
     styles = {"direct": ("o-", "C0", "direct ray casting, adaptive (pixel sizes)"),
               "direct-grid": ("o:", "C7", "direct ray casting, regular grid (pixel sizes)"),
               "cached": ("s-", "C2", "cached fast path (grid sizes)"),
@@ -200,8 +201,13 @@ def chart(results, path):
         ax.set_ylabel("RMS error vs converged reference [mag]")
         ax.set_title(f"{model}: real TOPEX pass 2024-07-30, 30 s at 5 fps")
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=7, loc="upper right")
-    fig.tight_layout()
+    # One legend below the panels: inside them it hid points (COSMOS 2502's Cycles, 0.65 mag off).
+    labels = {}
+    for ax in axes[0]:
+        for handle, label in zip(*ax.get_legend_handles_labels()):
+            labels.setdefault(label, handle)
+    fig.legend(labels.values(), labels.keys(), loc="lower center", ncol=3, fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0.0, 0.1, 1.0, 1.0))
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=120)
     print(f"chart written to {path}")
@@ -277,9 +283,9 @@ def table(results, load, peak_mb, convergence):
              "| model | frames | method | setting | wall per LC | CPU per LC | one-off setup | RMS error (mag) | memory |",
              "|---|---|---|---|---|---|---|---|---|"]
     for r in results:
-        cpu = "-" if not np.isfinite(r["cpu_s"]) else f"{r['cpu_s']:.3f} s"
+        cpu = "-" if not np.isfinite(r["cpu_s"]) else f"{r['cpu_s']:.4f} s"
         memory = f"{r['memory_mb']:.0f} MB" if r["memory_mb"] else "-"
-        lines.append(f"| {r['model']} | {r['frames']} | {r['method']} | {r['setting']} | {r['wall_s']:.3f} s | {cpu} "
+        lines.append(f"| {r['model']} | {r['frames']} | {r['method']} | {r['setting']} | {r['wall_s']:.4f} s | {cpu} "
                      f"| {r['setup_s']:.1f} s | {r['error_mag']:.4f} | {memory} |")
     verdicts = []
     for model in sorted({r["model"] for r in results}):
@@ -292,11 +298,34 @@ def table(results, load, peak_mb, convergence):
     print("\n".join(lines))
 
 
+def results_from_table(path=TABLE):
+    """The rows of the last recorded run in docs/benchmarks.md, as :func:`bench_model` gives them."""
+    text = path.read_text()
+    start = text.rfind("## Renderer speed vs accuracy")
+    if start < 0:
+        raise SystemExit(f"{path} holds no renderer run; run bench/render.py first")
+    results = []
+    for line in text[start:].splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) != 9 or not cells[1].isdigit():
+            continue
+        seconds = lambda cell: float(cell.split()[0]) if cell != "-" else float("nan")  # noqa: E731
+        results.append(dict(model=cells[0], frames=int(cells[1]), method=cells[2], setting=cells[3],
+                            wall_s=seconds(cells[4]), cpu_s=seconds(cells[5]), setup_s=seconds(cells[6]),
+                            error_mag=float(cells[7]), memory_mb=0.0 if cells[8] == "-" else seconds(cells[8])))
+    return results
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--no-cycles", action="store_true", help="skip Blender Cycles")
     parser.add_argument("--quick", action="store_true", help="fewer settings (smoke run); writes nothing")
+    parser.add_argument("--chart-only", action="store_true",
+                        help="redraw the chart from the last run recorded in docs/benchmarks.md; renders nothing")
     args = parser.parse_args(argv)
+    if args.chart_only:
+        chart(results_from_table(), CHART)
+        return 0
     load = os.getloadavg()[0]
     short = np.arange(150)  # 30 s at 5 fps
     long = np.arange(2320)  # the whole 464 s pass
