@@ -47,7 +47,7 @@ import weakref
 
 import numpy as np
 
-from raycast import _kernels
+from raycast import _cache_kernels
 from raycast.direct import _check_directions, _open3d_scene, sun_disk_directions, sun_samples_for
 from raycast.scene import Scene
 
@@ -307,7 +307,7 @@ class SceneCache:
         return (1.0 - t) * low + t * high
 
     def _pose_intensity(self, pose, sun, obs):
-        # Arrays are (frames, groups or classes): the compiled loops (raycast._kernels) run
+        # Arrays are (frames, groups or classes): the compiled loops (raycast._cache_kernels) run
         # over one frame's groups at a time.
         m = len(sun)
         sun32, obs32 = sun.astype(np.float32), obs.astype(np.float32)
@@ -325,7 +325,7 @@ class SceneCache:
         # never negative; the factors' float32 rounding can make it -1e-7), and the mean shading
         # normal of its groups weighted by that area in each frame (so a class shared by faces
         # that are gated or shadowed differently is shaded where its light comes from).
-        area, normal = _kernels.class_sums(weight, pose.normal_geo, pose.normal_shade, pose.group_class, sun32,
+        area, normal = _cache_kernels.class_sums(weight, pose.normal_geo, pose.normal_shade, pose.group_class, sun32,
                                            obs32, pose.n_classes)
         total = np.zeros(m)
         # One BRDF evaluation per material, on the (class, frame) pairs with light.
@@ -443,18 +443,18 @@ def _add_bit_weight(out, pose, sun, obs, grid_size, edge_weights):
     would smear it: rays toward the exact direction decide, from the element's points at the
     barycentric ``edge_weights`` (k, 3), and the element counts by the fraction of them both
     lit and seen (as the direct renderer's shadow rays). Elements facing away from the exact
-    Sun or observer get no rays. The word-wide loops are compiled (raycast._kernels).
+    Sun or observer get no rays. The word-wide loops are compiled (raycast._cache_kernels).
     """
     area = pose.raw_area
     sun32, obs32 = np.ascontiguousarray(sun, dtype=np.float32), np.ascontiguousarray(obs, dtype=np.float32)
     sun_nodes, obs_nodes = (cube_grid_weights(d, grid_size)[0].astype(np.int64) for d in (sun, obs))
-    frame, element, need = _kernels.agreed_weight(out, pose.raw_bits, sun_nodes, obs_nodes, sun32, obs32,
+    frame, element, need = _cache_kernels.agreed_weight(out, pose.raw_bits, sun_nodes, obs_nodes, sun32, obs32,
                                                   pose.raw_normals, area.indptr, area.indices, area.data)
     if len(frame):
         origins = _ray_origins(pose, edge_weights)
-        rays = _kernels.pair_rays(need, frame, element, origins, sun32, obs32)
+        rays = _cache_kernels.pair_rays(need, frame, element, origins, sun32, obs32)
         occluded = _raycaster(pose).test_occlusions(rays).numpy()
-        _kernels.add_pairs(out, frame, element, _kernels.open_fraction(need, occluded, len(edge_weights)),
+        _cache_kernels.add_pairs(out, frame, element, _cache_kernels.open_fraction(need, occluded, len(edge_weights)),
                            area.indptr, area.indices, area.data)
 
 
@@ -639,7 +639,7 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quant
     # (_visibility leaves them set for the cosine gate): an element facing well away from the
     # Sun or the observer then has no bit set around it, and the run time passes over it.
     above = directions @ raw_geo.T > -band
-    raw_bits = _kernels.pack_words(visibility[:, raw_columns].astype(bool) & above)
+    raw_bits = _cache_kernels.pack_words(visibility[:, raw_columns].astype(bool) & above)
     return _Pose(normal_shade.astype(np.float32), group_class.astype(np.int32), n_classes,
                  normal_geo.astype(np.float32), area_exposed.astype(np.float32), factors,
                  np.asarray(factor_starts, dtype=np.int64), factor_groups.astype(np.int64), raw_bits, len(raw_columns),

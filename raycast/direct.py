@@ -31,7 +31,7 @@ import math
 
 import numpy as np
 
-from raycast import _kernels
+from raycast import _direct_kernels
 from raycast.scene import Scene
 
 __all__ = ["DirectRenderer", "SAMPLINGS", "SUN_RADIUS_RAD", "sun_disk_directions", "orthonormal_basis"]
@@ -253,7 +253,7 @@ class DirectRenderer:
         base = (center + (start_u + 0.5 * h)[:, None] * u + (start_v + 0.5 * h)[:, None] * v
                 + (radius + 1.0) * obs_body)
         step_u, step_v = h * u, h * v
-        # Ray origin of each tile's first pixel (raycast._kernels.tile_rays steps across the tile).
+        # Ray origin of each tile's first pixel (raycast._direct_kernels.tile_rays steps across the tile).
         tile_origin = (base[tile_frame] + (_TILE * tile_iu)[:, None] * step_u[tile_frame]
                        + (_TILE * tile_iv)[:, None] * step_v[tile_frame]).astype(np.float32)
         step_u32, step_v32 = step_u.astype(np.float32), step_v.astype(np.float32)
@@ -262,9 +262,9 @@ class DirectRenderer:
         for begin in range(0, len(tile_frame), tiles_per_batch):
             sl = slice(begin, begin + tiles_per_batch)
             owner = tile_frame[sl]
-            rays = _kernels.tile_rays(tile_origin[sl], owner, step_u32, step_v32, backward, _TILE)
+            rays = _direct_kernels.tile_rays(tile_origin[sl], owner, step_u32, step_v32, backward, _TILE)
             hits = scene.cast_rays(rays)
-            frames, prim, uv, points = _kernels.tile_hits(rays, hits["t_hit"].numpy(), hits["primitive_ids"].numpy(),
+            frames, prim, uv, points = _direct_kernels.tile_hits(rays, hits["t_hit"].numpy(), hits["primitive_ids"].numpy(),
                                                           hits["primitive_uvs"].numpy(), owner, _TILE ** 2)
             if len(frames) == 0:
                 continue
@@ -291,7 +291,7 @@ class DirectRenderer:
         gives flat-shaded hits their radiance by look-up."""
         total = np.zeros(len(frames))
         reached = np.zeros(len(frames), dtype=bool)
-        normals, lit, rays = _kernels.sunward_hits(frames, prim, points, mesh.face_normals, sun_body, obs_body,
+        normals, lit, rays = _direct_kernels.sunward_hits(frames, prim, points, mesh.face_normals, sun_body, obs_body,
                                                    1e-4 * max(mesh.radius_m, 1.0))
         if len(lit) == 0:
             return total, reached
@@ -303,7 +303,7 @@ class DirectRenderer:
             total[flat] = flat_table[frames[flat], prim[flat]]
             lit, smooth = lit[smooth], smooth[smooth]
         # Only smooth-shaded triangles need the barycentric interpolation of corner normals.
-        _kernels.interpolated_normals(normals, lit[smooth], prim, uv, mesh.corner_normals)
+        _direct_kernels.interpolated_normals(normals, lit[smooth], prim, uv, mesh.corner_normals)
         total[lit] = self._radiance(mesh.material_index[prim[lit]], normals[lit], frames[lit], sun_body, obs_body)
         return total, reached
 

@@ -33,7 +33,7 @@ import math
 
 import numpy as np
 
-from raycast import _kernels
+from raycast import _direct_kernels
 
 __all__ = ["surface_classes", "coarse_levels", "EdgeTopology", "AdaptiveSampler"]
 
@@ -271,11 +271,11 @@ class AdaptiveSampler:
         """
         sun, obs = self._frame[:2]
         base, step_u, step_v, backward = self._rays
-        rays = _kernels.lattice_rays(base, step_u, step_v, backward, frame, i.astype(np.float32),
+        rays = _direct_kernels.lattice_rays(base, step_u, step_v, backward, frame, i.astype(np.float32),
                                      j.astype(np.float32))
         hits = self.raycaster.cast_rays(rays)
         self.n_rays += len(rays)
-        hit, points = _kernels.ray_hits(rays, hits["t_hit"].numpy())
+        hit, points = _direct_kernels.ray_hits(rays, hits["t_hit"].numpy())
         cls = np.full(len(frame), -1, dtype=np.int64)
         value = np.zeros(len(frame))
         if len(hit):

@@ -3,7 +3,7 @@
 import numpy as np
 from scipy import sparse
 
-from raycast import _kernels
+from raycast import _cache_kernels
 
 
 def _case(seed, n_elements, n_frames, n_directions=40, n_groups=7, density=0.7):
@@ -41,7 +41,7 @@ def _run(case):
     """(m, g) agreed area and the mixed pairs, from the compiled loop."""
     bits, sun_nodes, obs_nodes, sun, obs, normals, area = case
     out = np.zeros((len(sun), area.shape[0]), dtype=np.float32)
-    pairs = _kernels.agreed_weight(out, _kernels.pack_words(bits), sun_nodes, obs_nodes, sun, obs, normals,
+    pairs = _cache_kernels.agreed_weight(out, _cache_kernels.pack_words(bits), sun_nodes, obs_nodes, sun, obs, normals,
                                    area.indptr, area.indices, area.data)
     return (out, *pairs)
 
@@ -78,7 +78,7 @@ def test_pairs_add_their_value_times_area_to_each_group():
     out = np.zeros((5, area.shape[0]), dtype=np.float32)
     frames, elements = np.array([0, 0, 4]), np.array([3, 69, 3])
     values = np.array([0.5, 1.0, 0.25], dtype=np.float32)
-    _kernels.add_pairs(out, frames, elements, values, area.indptr, area.indices, area.data)
+    _cache_kernels.add_pairs(out, frames, elements, values, area.indptr, area.indices, area.data)
     dense = area.toarray()
     expected = np.zeros_like(out)
     for f, e, v in zip(frames, elements, values):
@@ -92,7 +92,7 @@ def test_rays_and_open_fractions_follow_the_pairs_needs():
     obs = np.array([[0, 0, 1], [0, -1, 0]], dtype=np.float32)
     need = np.array([1, 2, 3], dtype=np.uint8)
     frames, elements = np.array([0, 1, 1]), np.array([3, 0, 2])
-    rays = _kernels.pair_rays(need, frames, elements, origins, sun, obs)
+    rays = _cache_kernels.pair_rays(need, frames, elements, origins, sun, obs)
     # Toward the Sun: pairs 0 and 2; then toward the observer: pairs 1 and 2; two points each.
     expected = [(3, sun[0]), (3, sun[0]), (2, sun[1]), (2, sun[1]), (0, obs[1]), (0, obs[1]), (2, obs[1]), (2, obs[1])]
     point = [0, 1] * 4
@@ -100,7 +100,7 @@ def test_rays_and_open_fractions_follow_the_pairs_needs():
         np.testing.assert_array_equal(rays[row, :3], origins[e, j])
         np.testing.assert_array_equal(rays[row, 3:], d)
     occluded = np.array([True, False, False, False, False, True, True, True])
-    np.testing.assert_allclose(_kernels.open_fraction(need, occluded, 2), [0.5, 0.5, 0.0])
+    np.testing.assert_allclose(_cache_kernels.open_fraction(need, occluded, 2), [0.5, 0.5, 0.0])
 
 
 def test_class_sums_gate_and_weight_by_the_geometric_normal():
@@ -111,7 +111,7 @@ def test_class_sums_gate_and_weight_by_the_geometric_normal():
     normal_geo, normal_shade = unit(rng.normal(size=(n_groups, 3))), unit(rng.normal(size=(n_groups, 3)))
     group_class = rng.integers(0, n_classes, n_groups).astype(np.int32)
     sun, obs = unit(rng.normal(size=(m, 3))), unit(rng.normal(size=(m, 3)))
-    area, normal = _kernels.class_sums(np.ascontiguousarray(weight.T), normal_geo, normal_shade, group_class, sun, obs, n_classes)
+    area, normal = _cache_kernels.class_sums(np.ascontiguousarray(weight.T), normal_geo, normal_shade, group_class, sun, obs, n_classes)
     cos_o, cos_s = normal_geo @ obs.T, normal_geo @ sun.T
     gated = np.maximum(weight, 0.0) * np.where((cos_o > 0) & (cos_s > 0), cos_o, 0.0)
     one_hot = np.eye(n_classes)[group_class].T                      # (c, g)

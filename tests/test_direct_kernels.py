@@ -1,0 +1,59 @@
+"""The direct renderer's compiled loops against the same steps written out in numpy."""
+
+import numpy as np
+
+from raycast import _direct_kernels
+
+
+def _unit(a):
+    return a / np.linalg.norm(a, axis=-1, keepdims=True)
+
+
+def test_sunward_hits_turn_normals_to_the_observer_and_keep_those_facing_the_sun():
+    rng = np.random.default_rng(1)
+    n_hits, n_frames, n_tri = 200, 4, 9
+    frames, prim = rng.integers(0, n_frames, n_hits), rng.integers(0, n_tri, n_hits)
+    points = rng.normal(size=(n_hits, 3)).astype(np.float32)
+    face_normals = _unit(rng.normal(size=(n_tri, 3)))
+    sun, obs = _unit(rng.normal(size=(n_frames, 3))), _unit(rng.normal(size=(n_frames, 3)))
+    normals, lit, rays = _direct_kernels.sunward_hits(frames, prim, points, face_normals, sun, obs, 1e-3)
+    turned = face_normals[prim] * np.where(np.einsum("ij,ij->i", face_normals[prim], obs[frames]) < 0, -1.0, 1.0)[:, None]
+    np.testing.assert_array_equal(normals, turned)
+    expected_lit = np.flatnonzero(np.einsum("ij,ij->i", turned, sun[frames]) > 0.0)
+    np.testing.assert_array_equal(lit, expected_lit)
+    assert 0 < len(lit) < n_hits
+    np.testing.assert_allclose(rays[:, :3], points[lit] + 1e-3 * turned[lit], atol=1e-6)
+    np.testing.assert_allclose(rays[:, 3:], sun[frames[lit]], atol=1e-7)
+
+
+def test_interpolated_normals_mix_the_corners_on_the_seen_side():
+    corner_normals = _unit(np.array([[[0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [0.0, 1.0, 1.0]]]))
+    uv = np.array([[0.0, 0.0], [0.5, 0.25], [0.2, 0.2]], dtype=np.float32)
+    normals = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0]])  # the third seen from below
+    prim = np.zeros(3, dtype=np.int64)
+    _direct_kernels.interpolated_normals(normals, np.array([1, 2]), prim, uv, corner_normals)
+    np.testing.assert_array_equal(normals[0], [0.0, 0.0, 1.0])  # not in the rows: untouched
+    for row, sign in ((1, 1.0), (2, -1.0)):
+        a, b = uv[row]
+        mix = (1 - a - b) * corner_normals[0, 0] + a * corner_normals[0, 1] + b * corner_normals[0, 2]
+        np.testing.assert_allclose(normals[row], sign * _unit(mix), rtol=1e-6)
+
+
+def test_tile_rays_and_their_hits():
+    origin = np.array([[1.0, 2.0, 3.0]], dtype=np.float32)
+    step_u = np.array([[0.1, 0.0, 0.0]], dtype=np.float32)
+    step_v = np.array([[0.0, 0.2, 0.0]], dtype=np.float32)
+    backward = np.array([[0.0, 0.0, -1.0]], dtype=np.float32)
+    rays = _direct_kernels.tile_rays(origin, np.array([0]), step_u, step_v, backward, 2)
+    np.testing.assert_allclose(rays[:, :3], [[1.0, 2.0, 3.0], [1.0, 2.2, 3.0], [1.1, 2.0, 3.0], [1.1, 2.2, 3.0]],
+                               rtol=1e-6)
+    t_hit = np.array([np.inf, 2.0, np.inf, 0.5], dtype=np.float32)
+    frames, prim, uv, points = _direct_kernels.tile_hits(rays, t_hit, np.array([7, 8, 9, 10], dtype=np.uint32),
+                                                         np.arange(8, dtype=np.float32).reshape(4, 2), np.array([5]), 4)
+    np.testing.assert_array_equal(frames, [5, 5])
+    np.testing.assert_array_equal(prim, [8, 10])
+    np.testing.assert_array_equal(uv, [[2, 3], [6, 7]])
+    np.testing.assert_allclose(points, [[1.0, 2.2, 1.0], [1.1, 2.2, 2.5]], rtol=1e-6)
+    hit, end = _direct_kernels.ray_hits(rays, t_hit)
+    np.testing.assert_array_equal(hit, [1, 3])
+    np.testing.assert_allclose(end, points, rtol=1e-6)
