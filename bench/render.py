@@ -309,10 +309,10 @@ def results_from_table(path=TABLE):
         cells = [c.strip() for c in line.strip().strip("|").split("|")]
         if len(cells) != 9 or not cells[1].isdigit():
             continue
-        seconds = lambda cell: float(cell.split()[0]) if cell != "-" else float("nan")  # noqa: E731
+        number = lambda cell: float(cell.split()[0]) if cell != "-" else float("nan")  # noqa: E731 ("0.5 s", "45 MB")
         results.append(dict(model=cells[0], frames=int(cells[1]), method=cells[2], setting=cells[3],
-                            wall_s=seconds(cells[4]), cpu_s=seconds(cells[5]), setup_s=seconds(cells[6]),
-                            error_mag=float(cells[7]), memory_mb=0.0 if cells[8] == "-" else seconds(cells[8])))
+                            wall_s=number(cells[4]), cpu_s=number(cells[5]), setup_s=number(cells[6]),
+                            error_mag=float(cells[7]), memory_mb=0.0 if cells[8] == "-" else number(cells[8])))
     return results
 
 

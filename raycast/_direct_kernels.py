@@ -26,14 +26,15 @@ def tile_rays(tile_origin, owner, step_u, step_v, backward, tile):
 
 
 @njit(cache=True, nogil=True)
-def tile_hits(rays, t_hit, prim_ids, uvs, owner, rays_per_tile):
-    """The hits of :func:`tile_rays`' rays: their frames (``owner`` of their tile), triangles,
-    barycentric (u, v) and (h, 3) float32 points."""
+def ray_hits(rays, t_hit, prim_ids, uvs, owner, rays_per_owner):
+    """The rays that hit (finite ``t_hit``): their owners (``owner[r // rays_per_owner]`` for
+    ray r: a tile's frame, or with ``owner = arange`` and 1 the ray's own index), triangles,
+    barycentric (u, v) and (h, 3) float32 end points."""
     count = 0
     for r in range(len(t_hit)):
         if np.isfinite(t_hit[r]):
             count += 1
-    frames = np.empty(count, dtype=np.int64)
+    owners = np.empty(count, dtype=np.int64)
     prim = np.empty(count, dtype=np.int64)
     uv = np.empty((count, 2), dtype=np.float32)
     points = np.empty((count, 3), dtype=np.float32)
@@ -42,13 +43,13 @@ def tile_hits(rays, t_hit, prim_ids, uvs, owner, rays_per_tile):
         t = t_hit[r]
         if not np.isfinite(t):
             continue
-        frames[n] = owner[r // rays_per_tile]
+        owners[n] = owner[r // rays_per_owner]
         prim[n] = prim_ids[r]
         uv[n, 0], uv[n, 1] = uvs[r, 0], uvs[r, 1]
         for x in range(3):
             points[n, x] = rays[r, x] + t * rays[r, 3 + x]
         n += 1
-    return frames, prim, uv, points
+    return owners, prim, uv, points
 
 
 @njit(cache=True, nogil=True)
@@ -113,23 +114,3 @@ def lattice_rays(base, step_u, step_v, backward, frame, i, j):
             rays[n, x] = base[x, f] + i[n] * step_u[x, f] + j[n] * step_v[x, f]
             rays[n, 3 + x] = backward[x, f]
     return rays
-
-
-@njit(cache=True, nogil=True)
-def ray_hits(rays, t_hit):
-    """Indices of the rays that hit (finite ``t_hit``) and their (h, 3) float32 end points."""
-    count = 0
-    for r in range(len(t_hit)):
-        if np.isfinite(t_hit[r]):
-            count += 1
-    hit = np.empty(count, dtype=np.int64)
-    points = np.empty((count, 3), dtype=np.float32)
-    n = 0
-    for r in range(len(t_hit)):
-        t = t_hit[r]
-        if np.isfinite(t):
-            hit[n] = r
-            for x in range(3):
-                points[n, x] = rays[r, x] + t * rays[r, 3 + x]
-            n += 1
-    return hit, points

@@ -264,8 +264,8 @@ class DirectRenderer:
             owner = tile_frame[sl]
             rays = _direct_kernels.tile_rays(tile_origin[sl], owner, step_u32, step_v32, backward, _TILE)
             hits = scene.cast_rays(rays)
-            frames, prim, uv, points = _direct_kernels.tile_hits(rays, hits["t_hit"].numpy(), hits["primitive_ids"].numpy(),
-                                                          hits["primitive_uvs"].numpy(), owner, _TILE ** 2)
+            frames, prim, uv, points = _direct_kernels.ray_hits(rays, hits["t_hit"].numpy(), hits["primitive_ids"].numpy(),
+                                                                hits["primitive_uvs"].numpy(), owner, _TILE ** 2)
             if len(frames) == 0:
                 continue
             contribution, _ = self._shade(mesh, scene, frames, prim, uv, points, sun_body, obs_body)

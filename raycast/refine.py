@@ -275,13 +275,12 @@ class AdaptiveSampler:
                                      j.astype(np.float32))
         hits = self.raycaster.cast_rays(rays)
         self.n_rays += len(rays)
-        hit, points = _direct_kernels.ray_hits(rays, hits["t_hit"].numpy())
+        hit, prim, uv, points = _direct_kernels.ray_hits(rays, hits["t_hit"].numpy(), hits["primitive_ids"].numpy(),
+                                                     hits["primitive_uvs"].numpy(), np.arange(len(rays)), 1)
         cls = np.full(len(frame), -1, dtype=np.int64)
         value = np.zeros(len(frame))
         if len(hit):
-            prim = hits["primitive_ids"].numpy()[hit].astype(np.int64)
-            value[hit], lit = self.shade(frame[hit], prim, hits["primitive_uvs"].numpy()[hit], points, sun, obs,
-                                         self._flat_table)
+            value[hit], lit = self.shade(frame[hit], prim, uv, points, sun, obs, self._flat_table)
             cls[hit] = 2 * self.classes[prim] + lit
         return cls, value
 

@@ -48,12 +48,15 @@ def test_tile_rays_and_their_hits():
     np.testing.assert_allclose(rays[:, :3], [[1.0, 2.0, 3.0], [1.0, 2.2, 3.0], [1.1, 2.0, 3.0], [1.1, 2.2, 3.0]],
                                rtol=1e-6)
     t_hit = np.array([np.inf, 2.0, np.inf, 0.5], dtype=np.float32)
-    frames, prim, uv, points = _direct_kernels.tile_hits(rays, t_hit, np.array([7, 8, 9, 10], dtype=np.uint32),
+    frames, prim, uv, points = _direct_kernels.ray_hits(rays, t_hit, np.array([7, 8, 9, 10], dtype=np.uint32),
                                                          np.arange(8, dtype=np.float32).reshape(4, 2), np.array([5]), 4)
     np.testing.assert_array_equal(frames, [5, 5])
     np.testing.assert_array_equal(prim, [8, 10])
     np.testing.assert_array_equal(uv, [[2, 3], [6, 7]])
     np.testing.assert_allclose(points, [[1.0, 2.2, 1.0], [1.1, 2.2, 2.5]], rtol=1e-6)
-    hit, end = _direct_kernels.ray_hits(rays, t_hit)
+    # Each ray its own owner (as the adaptive sampler asks): the owners are the hit rays.
+    hit, prim, _, end = _direct_kernels.ray_hits(rays, t_hit, np.array([7, 8, 9, 10], dtype=np.uint32),
+                                                 np.zeros((4, 2), dtype=np.float32), np.arange(4), 1)
     np.testing.assert_array_equal(hit, [1, 3])
+    np.testing.assert_array_equal(prim, [8, 10])
     np.testing.assert_allclose(end, points, rtol=1e-6)
