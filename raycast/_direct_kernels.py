@@ -114,3 +114,129 @@ def lattice_rays(base, step_u, step_v, backward, frame, i, j):
             rays[n, x] = base[x, f] + i[n] * step_u[x, f] + j[n] * step_v[x, f]
             rays[n, 3 + x] = backward[x, f]
     return rays
+
+
+@njit(cache=True, nogil=True)
+def raster_hits(corners, pu, pv, depth, start_u, start_v, h, n_u, n_v, frames, drawn, sunward):
+    """First hits of the orthographic ray grid by scan conversion, kept where the hit side
+    faces the Sun.
+
+    Pixel (i, j) of frame f is the ray through ``(start_u[f] + (i + 1/2) h, start_v[f] +
+    (j + 1/2) h)`` in the image plane; every triangle with ``drawn[t, f]`` is scan-converted
+    onto that lattice with a depth test (``depth``: distance toward the observer, nearest
+    wins), which finds the same triangle a ray cast along the grid finds first. Only the
+    window of pixels that sunward triangles cover is drawn: elsewhere no hit adds light.
+
+    Parameters
+    ----------
+    corners : (t, 3, 3) float, triangle corners (body frame).
+    pu, pv, depth : (3 t, m) float, corner coordinates along the image axes and toward the observer.
+    start_u, start_v : (m,) float; h : float; n_u, n_v : (m,) int, pixels per frame and axis.
+    frames : (k,) int, the frames to render.
+    drawn : (t, m) bool, triangles that can be seen (not an inner side of a closed part).
+    sunward : (t, m) bool, triangles whose seen side faces the Sun.
+
+    Returns
+    -------
+    owners, prim, uv, points : as :func:`ray_hits`, for the kept hits.
+    """
+    n_tri = len(corners)
+    window = np.zeros((len(frames), 4), dtype=np.int64)
+    capacity, largest = 0, 0
+    for k in range(len(frames)):
+        f = frames[k]
+        lo_u, hi_u, lo_v, hi_v = np.inf, -np.inf, np.inf, -np.inf
+        for t in range(n_tri):
+            if sunward[t, f] and drawn[t, f]:
+                for c in range(3):
+                    lo_u, hi_u = min(lo_u, pu[3 * t + c, f]), max(hi_u, pu[3 * t + c, f])
+                    lo_v, hi_v = min(lo_v, pv[3 * t + c, f]), max(hi_v, pv[3 * t + c, f])
+        if lo_u > hi_u:
+            continue
+        window[k, 0] = max(int(np.ceil((lo_u - start_u[f]) / h - 0.5)), 0)
+        window[k, 1] = min(int(np.floor((hi_u - start_u[f]) / h - 0.5)), n_u[f] - 1) + 1
+        window[k, 2] = max(int(np.ceil((lo_v - start_v[f]) / h - 0.5)), 0)
+        window[k, 3] = min(int(np.floor((hi_v - start_v[f]) / h - 0.5)), n_v[f] - 1) + 1
+        size = max(window[k, 1] - window[k, 0], 0) * max(window[k, 3] - window[k, 2], 0)
+        capacity += size
+        largest = max(largest, size)
+    owners = np.empty(capacity, dtype=np.int64)
+    prim = np.empty(capacity, dtype=np.int64)
+    uv = np.empty((capacity, 2), dtype=np.float32)
+    points = np.empty((capacity, 3), dtype=np.float32)
+    nearest = np.empty(largest, dtype=np.float32)
+    winner = np.empty(largest, dtype=np.int32)
+    xs, ys = np.empty(3), np.empty(3)
+    count = 0
+    for k in range(len(frames)):
+        f = frames[k]
+        i0, i1, j0, j1 = window[k, 0], window[k, 1], window[k, 2], window[k, 3]
+        width, rows = i1 - i0, j1 - j0
+        if width <= 0 or rows <= 0:
+            continue
+        nearest[: width * rows] = -np.inf
+        winner[: width * rows] = -1
+        for t in range(n_tri):
+            if not drawn[t, f]:
+                continue
+            # Lattice coordinates within the window: pixel (i, j) of the window at (i, j).
+            for c in range(3):
+                xs[c] = (pu[3 * t + c, f] - start_u[f]) / h - 0.5 - i0
+                ys[c] = (pv[3 * t + c, f] - start_v[f]) / h - 0.5 - j0
+            area = (xs[1] - xs[0]) * (ys[2] - ys[0]) - (xs[2] - xs[0]) * (ys[1] - ys[0])
+            if area == 0.0:
+                continue
+            d0, d1, d2 = depth[3 * t, f], depth[3 * t + 1, f], depth[3 * t + 2, f]
+            low = max(int(np.ceil(min(ys[0], ys[1], ys[2]))), 0)
+            high = min(int(np.floor(max(ys[0], ys[1], ys[2]))), rows - 1)
+            for j in range(low, high + 1):
+                left, right = np.inf, -np.inf
+                for c in range(3):
+                    y0, y1 = ys[c], ys[(c + 1) % 3]
+                    if (y0 - j) * (y1 - j) > 0.0:
+                        continue
+                    if y0 == y1:
+                        left = min(left, xs[c], xs[(c + 1) % 3])
+                        right = max(right, xs[c], xs[(c + 1) % 3])
+                    else:
+                        x = xs[c] + (j - y0) * (xs[(c + 1) % 3] - xs[c]) / (y1 - y0)
+                        left, right = min(left, x), max(right, x)
+                first = max(int(np.ceil(left)), 0)
+                last = min(int(np.floor(right)), width - 1)
+                if first > last:
+                    continue
+                # Barycentric (a, b) and depth are linear along the row.
+                a = ((first - xs[0]) * (ys[2] - ys[0]) - (xs[2] - xs[0]) * (j - ys[0])) / area
+                b = ((xs[1] - xs[0]) * (j - ys[0]) - (first - xs[0]) * (ys[1] - ys[0])) / area
+                da, db = (ys[2] - ys[0]) / area, -(ys[1] - ys[0]) / area
+                z = d0 + a * (d1 - d0) + b * (d2 - d0)
+                dz = da * (d1 - d0) + db * (d2 - d0)
+                row = j * width
+                for i in range(first, last + 1):
+                    if z > nearest[row + i]:
+                        nearest[row + i] = z
+                        winner[row + i] = t
+                    z += dz
+        for pixel in range(width * rows):
+            t = winner[pixel]
+            if t < 0 or not sunward[t, f]:
+                continue
+            j, i = pixel // width, pixel % width
+            at_u = (i + i0 + 0.5) * h + start_u[f]
+            at_v = (j + j0 + 0.5) * h + start_v[f]
+            for c in range(3):
+                xs[c] = pu[3 * t + c, f]
+                ys[c] = pv[3 * t + c, f]
+            area = (xs[1] - xs[0]) * (ys[2] - ys[0]) - (xs[2] - xs[0]) * (ys[1] - ys[0])
+            a = ((at_u - xs[0]) * (ys[2] - ys[0]) - (xs[2] - xs[0]) * (at_v - ys[0])) / area
+            b = ((xs[1] - xs[0]) * (at_v - ys[0]) - (at_u - xs[0]) * (ys[1] - ys[0])) / area
+            a, b = min(max(a, 0.0), 1.0), min(max(b, 0.0), 1.0)
+            if a + b > 1.0:
+                total = a + b
+                a, b = a / total, b / total
+            owners[count], prim[count] = f, t
+            uv[count, 0], uv[count, 1] = a, b
+            for x in range(3):
+                points[count, x] = (1.0 - a - b) * corners[t, 0, x] + a * corners[t, 1, x] + b * corners[t, 2, x]
+            count += 1
+    return owners[:count], prim[:count], uv[:count], points[:count]

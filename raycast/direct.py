@@ -36,7 +36,7 @@ from raycast.scene import Scene
 
 __all__ = ["DirectRenderer", "SAMPLINGS", "SUN_RADIUS_RAD", "sun_disk_directions", "orthonormal_basis"]
 
-SAMPLINGS = ("adaptive", "grid")
+SAMPLINGS = ("adaptive", "grid", "raster")
 
 # Mean angular radius of the solar disk seen from the Earth: 0.533 deg / 2.
 SUN_RADIUS_RAD = math.radians(0.533 / 2.0)
@@ -124,11 +124,14 @@ class DirectRenderer:
     sun_samples : int, optional, points of the solar disk per BRDF evaluation for every
         material; default per material from ``accuracy_mag`` (:func:`sun_samples_for`).
     accuracy_mag : float, the accuracy the solar-disk sampling is chosen for.
-    sampling : {"adaptive", "grid"}
+    sampling : {"adaptive", "grid", "raster"}
         ``"adaptive"`` (default): rays at the corners of coarse cells, split down to
         ``pixel_size_m`` only where an edge, a shadow or a shading change may lie inside
         (:mod:`raycast.refine`); ``"grid"``: every pixel of the regular grid, the plain reference
-        the adaptive sampler is tested against.
+        the adaptive sampler is tested against; ``"raster"``: the same grid with its first hits
+        found by scan conversion with a depth test (:func:`raycast._direct_kernels.raster_hits`)
+        instead of rays, hit for hit the grid's, with shadow rays as ever: the fastest for
+        meshes of up to a few thousand triangles.
     """
 
     scene: Scene
@@ -228,7 +231,7 @@ class DirectRenderer:
         center, radius = mesh.center_m, mesh.radius_m
         u, v = orthonormal_basis(obs_body)
         rel = mesh.vertices_m - center
-        pu, pv = rel @ u.T, rel @ v.T
+        pu, pv = _products(rel, u), _products(rel, v)
         h = self.pixel_size_m
         frame = np.arange(len(sun_body))
         offset_u = (0.5 + (frame + 1) / _PLASTIC) % 1.0
@@ -239,6 +242,10 @@ class DirectRenderer:
             return self._sampler().intensity(sun_body, obs_body, u, v, start_u, start_v)
         n_u = np.floor((pu.max(axis=0) - start_u) / h).astype(np.int64) + 1
         n_v = np.floor((pv.max(axis=0) - start_v) / h).astype(np.int64) + 1
+        cos_o, cos_s = _products(mesh.face_normals, obs_body), _products(mesh.face_normals, sun_body)
+        sunward = np.where(cos_o < 0.0, -cos_s, cos_s) > 0.0
+        if self.sampling == "raster":
+            return self._raster(mesh, scene, sun_body, obs_body, pu, pv, start_u, start_v, n_u, n_v, cos_o, sunward)
         # Empty-space skipping: the grid is cut into tiles of TILE x TILE pixels and only tiles
         # touched by the projected bounding box of some triangle whose seen side faces the Sun
         # are cast. A ray elsewhere misses or ends on a side turned away from the Sun, which adds
@@ -246,8 +253,6 @@ class DirectRenderer:
         # are on sunward sides.)
         tiles_u = (n_u + _TILE - 1) // _TILE
         tiles_v = (n_v + _TILE - 1) // _TILE
-        cos_o, cos_s = mesh.face_normals @ obs_body.T, mesh.face_normals @ sun_body.T
-        sunward = np.where(cos_o < 0.0, -cos_s, cos_s) > 0.0
         tile_frame, tile_iu, tile_iv = _covered_tiles(mesh, pu, pv, start_u, start_v, h * _TILE, tiles_u, tiles_v,
                                                       sunward)
         base = (center + (start_u + 0.5 * h)[:, None] * u + (start_v + 0.5 * h)[:, None] * v
@@ -269,6 +274,33 @@ class DirectRenderer:
             if len(frames) == 0:
                 continue
             contribution, _ = self._shade(mesh, scene, frames, prim, uv, points, sun_body, obs_body)
+            result += np.bincount(frames, weights=contribution, minlength=len(result))
+        return result * h * h
+
+    def _raster(self, mesh, scene, sun_body, obs_body, pu, pv, start_u, start_v, n_u, n_v, cos_o, sunward):
+        """The regular grid's sum with first hits found by scan conversion
+        (:func:`raycast._direct_kernels.raster_hits`) instead of rays; shadow rays as ever."""
+        h = self.pixel_size_m
+        inner = self._state["inner"]
+        drawn = ~np.where(cos_o >= 0.0, inner[:, :1], inner[:, 1:])
+        depth = _products(mesh.vertices_m - mesh.center_m, obs_body)
+        corners = mesh.corners_m
+        result = np.zeros(len(sun_body))
+        # Hits on flat-shaded triangles take their radiance from a table per (frame, triangle).
+        flat = np.flatnonzero(~self._state["smooth"])
+        flat_table = self._flat_radiance(sun_body, obs_body, flat) if len(flat) else None
+        # Frames in batches of at most _MAX_RAYS_PER_BATCH pixels (the hit buffers' size).
+        pixels = np.cumsum(n_u * n_v)
+        begin = 0
+        while begin < len(sun_body):
+            end = max(begin + 1, int(np.searchsorted(pixels, pixels[begin] - n_u[begin] * n_v[begin]
+                                                     + _MAX_RAYS_PER_BATCH, side="right")))
+            frames, prim, uv, points = _direct_kernels.raster_hits(
+                corners, pu, pv, depth, start_u, start_v, h, n_u, n_v, np.arange(begin, end), drawn, sunward)
+            begin = end
+            if len(frames) == 0:
+                continue
+            contribution, _ = self._shade(mesh, scene, frames, prim, uv, points, sun_body, obs_body, flat_table)
             result += np.bincount(frames, weights=contribution, minlength=len(result))
         return result * h * h
 
@@ -324,18 +356,22 @@ class DirectRenderer:
                 total[idx] += weight * value * np.maximum(cos_i, 0.0)
         return total
 
-    def _flat_radiance(self, sun_body, obs_body):
+    def _flat_radiance(self, sun_body, obs_body, triangles=None):
         """(m, t) radiance of every triangle, flat-shaded with its face normal turned toward
-        the observer, lit if its face is: what a flat triangle's hits share within a frame."""
+        the observer, lit if its face is: what a flat triangle's hits share within a frame.
+        With ``triangles`` (indices) only their columns are filled; the rest are zero."""
         mesh = self._state["mesh"]
         m, t = len(sun_body), len(mesh.face_normals)
-        normals = np.broadcast_to(mesh.face_normals, (m, t, 3))
+        columns = np.arange(t) if triangles is None else np.asarray(triangles)
+        normals = np.broadcast_to(mesh.face_normals[columns], (m, len(columns), 3))
         facing = np.where(np.einsum("mtj,mj->mt", normals, obs_body) < 0.0, -1.0, 1.0)
         normals = (normals * facing[..., None]).reshape(-1, 3)
-        frames = np.repeat(np.arange(m), t)
-        table = self._radiance(np.tile(mesh.material_index, m), normals, frames, sun_body, obs_body)
-        table[np.einsum("ij,ij->i", normals, sun_body[frames]) <= 0.0] = 0.0
-        return table.reshape(m, t)
+        frames = np.repeat(np.arange(m), len(columns))
+        values = self._radiance(np.tile(mesh.material_index[columns], m), normals, frames, sun_body, obs_body)
+        values[np.einsum("ij,ij->i", normals, sun_body[frames]) <= 0.0] = 0.0
+        table = np.zeros((m, t))
+        table[:, columns] = values.reshape(m, len(columns))
+        return table
 
     def image(self, sun_body, obs_body):
         """What a camera looking along ``-obs_body`` sees: radiance per unit irradiance, 1/sr.
@@ -379,6 +415,7 @@ class DirectRenderer:
             self._state["raycaster"] = _open3d_scene(mesh)
             spread = np.abs(mesh.corner_normals - mesh.face_normals[:, None, :]).max(axis=(1, 2))
             self._state["smooth"] = spread > 1e-9
+            self._state["inner"] = mesh.inner_sides()
             self._state["sun_samples"] = tuple(
                 sun_samples_for(b, self.accuracy_mag) if self.sun_samples is None else int(self.sun_samples)
                 for b in mesh.brdfs)
@@ -436,6 +473,16 @@ def _covered_tiles(mesh, pu, pv, start_u, start_v, tile_m, tiles_u, tiles_v, sel
     inside = (np.arange(size_u)[None, :, None] < tiles_u[:, None, None]) & \
              (np.arange(size_v)[None, None, :] < tiles_v[:, None, None])
     return np.nonzero((cover > 0) & inside)
+
+
+def _products(vectors, directions):
+    """(n, m) dot products of (n, 3) ``vectors`` with (m, 3) ``directions``.
+
+    Written out rather than as a matrix product: for these sizes a threaded BLAS would hand the
+    product to worker threads that then spin, burning as much CPU time again as the whole
+    light curve's own work (measured with OpenBLAS on 2 cores).
+    """
+    return np.einsum("ij,mj->im", vectors, directions)
 
 
 def _check_directions(sun_body, obs_body):

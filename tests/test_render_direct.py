@@ -4,12 +4,14 @@ Each test runs over both implementations of `raycast.render.render` (direct ray 
 the cached fast path).
 """
 import math
+from collections import Counter
 
 import numpy as np
 import pytest
 
 from raycast.brdf import GGX, Lambertian, Principled
 from raycast.direct import DirectRenderer
+from raycast.models import topex
 from raycast.render import render
 from raycast.scene import Part, Scene
 from tests.conftest import MODELS
@@ -186,3 +188,68 @@ def test_grid_skips_only_tiles_whose_hits_face_away_from_the_sun(monkeypatch):
     np.testing.assert_allclose(skipping, full, rtol=1e-12)
     assert skipping.max() > 0.0
     assert counted["sunward"] < 0.9 * counted["every"]
+
+
+def _hit_table(renderer, sun, obs):
+    """The light curve, and a Counter of (frame, triangle) over the sunward first hits of the
+    regular grid, found by rays (``sampling="grid"``) or by scan conversion (``"raster"``)."""
+    recorded = Counter()
+    shade = renderer._shade
+
+    def recording(mesh, scene, frames, prim, *args, **kwargs):
+        recorded.update(zip(frames.tolist(), prim.tolist()))
+        return shade(mesh, scene, frames, prim, *args, **kwargs)
+
+    object.__setattr__(renderer, "_shade", recording)
+    total = renderer.intensity(sun, obs)
+    sunward = Counter()
+    mesh = renderer.scene.posed()
+    for (frame, triangle), count in recorded.items():
+        normal = mesh.face_normals[triangle] * np.sign(mesh.face_normals[triangle] @ obs[frame])
+        if normal @ sun[frame] > 0.0:
+            sunward[frame, triangle] += count
+    return total, sunward
+
+
+@pytest.mark.parametrize("model", ["topex", "cosmos2502"])
+def test_scan_conversion_finds_the_same_first_hits_as_rays(model):
+    # The raster sampling must be the regular grid, hit for hit: the same triangle at the
+    # same pixels (up to a pixel centred on an edge to float32 precision), so the same sum.
+    if model == "topex":
+        scene = topex.build()
+    else:
+        scene = Scene.from_file(MODELS / "cosmos2502_lotos.obj", materials=MODELS / "cosmos2502_lotos.materials.json")
+    rng = np.random.default_rng(11)
+    sun, obs = unit(rng.normal(size=(5, 3))), unit(rng.normal(size=(5, 3)))
+    rays, by_rays = _hit_table(DirectRenderer(scene, 0.03, sampling="grid"), sun, obs)
+    raster, by_raster = _hit_table(DirectRenderer(scene, 0.03, sampling="raster"), sun, obs)
+    hits = sum(by_rays.values())
+    assert hits > 10_000
+    # COSMOS 2502's cross is two boxes whose faces overlap in one plane: there either face is
+    # a first hit, so hits are compared per plane.
+    mesh = scene.posed()
+    plane = np.unique(np.round(np.column_stack([mesh.face_normals, np.einsum("ij,ij->i", mesh.face_normals,
+                                                                               mesh.corners_m[:, 0])]), 6),
+                      axis=0, return_inverse=True)[1].ravel()
+    by_plane = [Counter(), Counter()]
+    for table, counts in zip((by_rays, by_raster), by_plane):
+        for (frame, triangle), count in table.items():
+            counts[frame, plane[triangle]] += count
+    differing = sum(abs(by_plane[0][key] - by_plane[1][key]) for key in set(by_plane[0]) | set(by_plane[1]))
+    assert differing <= 1e-4 * hits
+    np.testing.assert_allclose(raster, rays, rtol=1e-4)
+    assert np.count_nonzero(raster) >= 3
+
+
+def test_scan_conversion_leaves_out_the_inner_sides_of_closed_parts_only():
+    # A sheet (open: both sides can be seen) in front of a closed box seen from inside its
+    # bounding box's corner: the sheet's far side and the box's outer faces are drawn, the
+    # box's inner sides never, and the sum equals the ray-cast grid's.
+    sheet = Part.plate("sheet", 1.0, 1.0, "paint").transformed(offset_m=(0.2, 0.0, 1.0))
+    scene = Scene.from_parts([Part.box("box", (1.0, 1.0, 1.0), "paint"), sheet], {"paint": Lambertian(0.5)})
+    sun = unit(np.array([[0.3, 0.2, 1.0], [0.3, 0.2, -1.0], [1.0, 0.1, 0.1]]))
+    obs = unit(np.array([[0.1, -0.4, 1.0], [-0.2, 0.1, -1.0], [0.8, 0.5, 0.2]]))
+    rays = DirectRenderer(scene, 0.005, sampling="grid").intensity(sun, obs)
+    raster = DirectRenderer(scene, 0.005, sampling="raster").intensity(sun, obs)
+    np.testing.assert_allclose(raster, rays, rtol=1e-3)
+    assert (raster > 0.0).all()

@@ -114,7 +114,7 @@ def test_adaptive_matches_grid_along_real_topex_pass(model):
 
 
 def test_sampling_is_checked():
-    with pytest.raises(ValueError, match=r"sampling='random' is unknown; use one of 'adaptive', 'grid'"):
+    with pytest.raises(ValueError, match=r"sampling='random' is unknown; use one of 'adaptive', 'grid', 'raster'"):
         DirectRenderer(rod_over_plate(), 0.01, sampling="random")
 
 
