@@ -117,7 +117,8 @@ def lattice_rays(base, step_u, step_v, backward, frame, i, j):
 
 
 @njit(cache=True, nogil=True)
-def raster_hits(corners, pu, pv, depth, start_u, start_v, h, n_u, n_v, frames, drawn, sunward):
+def raster_hits(corners, pu, pv, depth, start_u, start_v, h, n_u, n_v, frames, drawn, sunward, face_normals, obs,
+                sun, offset):
     """First hits of the orthographic ray grid by scan conversion, kept where the hit side
     faces the Sun.
 
@@ -135,10 +136,15 @@ def raster_hits(corners, pu, pv, depth, start_u, start_v, h, n_u, n_v, frames, d
     frames : (k,) int, the frames to render.
     drawn : (t, m) bool, triangles that can be seen (not an inner side of a closed part).
     sunward : (t, m) bool, triangles whose seen side faces the Sun.
+    face_normals : (t, 3) float; obs, sun : (m, 3) float, unit vectors.
+    offset : float, how far above the surface shadow rays start.
 
     Returns
     -------
-    owners, prim, uv, points : as :func:`ray_hits`, for the kept hits.
+    owners, prim : (k,) int64, frame and triangle of each kept hit.
+    uv : (k, 2) float32, barycentric (u, v).
+    shadow_rays : (k, 6) float32, from ``offset`` above the hit (along the face normal turned
+        toward the observer) toward the Sun.
     """
     n_tri = len(corners)
     window = np.zeros((len(frames), 4), dtype=np.int64)
@@ -163,7 +169,7 @@ def raster_hits(corners, pu, pv, depth, start_u, start_v, h, n_u, n_v, frames, d
     owners = np.empty(capacity, dtype=np.int64)
     prim = np.empty(capacity, dtype=np.int64)
     uv = np.empty((capacity, 2), dtype=np.float32)
-    points = np.empty((capacity, 3), dtype=np.float32)
+    shadow_rays = np.empty((capacity, 6), dtype=np.float32)
     nearest = np.empty(largest, dtype=np.float32)
     winner = np.empty(largest, dtype=np.int32)
     xs, ys = np.empty(3), np.empty(3)
@@ -236,7 +242,30 @@ def raster_hits(corners, pu, pv, depth, start_u, start_v, h, n_u, n_v, frames, d
                 a, b = a / total, b / total
             owners[count], prim[count] = f, t
             uv[count, 0], uv[count, 1] = a, b
+            side = 1.0
+            if face_normals[t, 0] * obs[f, 0] + face_normals[t, 1] * obs[f, 1] + face_normals[t, 2] * obs[f, 2] < 0.0:
+                side = -1.0
             for x in range(3):
-                points[count, x] = (1.0 - a - b) * corners[t, 0, x] + a * corners[t, 1, x] + b * corners[t, 2, x]
+                shadow_rays[count, x] = ((1.0 - a - b) * corners[t, 0, x] + a * corners[t, 1, x] + b * corners[t, 2, x]
+                                         + offset * side * face_normals[t, x])
+                shadow_rays[count, 3 + x] = sun[f, x]
             count += 1
-    return owners[:count], prim[:count], uv[:count], points[:count]
+    return owners[:count], prim[:count], uv[:count], shadow_rays[:count]
+
+
+@njit(cache=True, nogil=True)
+def flat_sums(frames, prim, blocked, smooth, flat_table, out):
+    """Add the table radiance ``flat_table[frame, triangle]`` of every unblocked hit on a
+    flat-shaded triangle to ``out[frame]`` (in place); return the unblocked smooth-shaded hits."""
+    rest = np.empty(len(frames), dtype=np.int64)
+    count = 0
+    for n in range(len(frames)):
+        if blocked[n]:
+            continue
+        t = prim[n]
+        if smooth[t]:
+            rest[count] = n
+            count += 1
+        else:
+            out[frames[n]] += flat_table[frames[n], t]
+    return rest[:count]

@@ -281,27 +281,33 @@ class DirectRenderer:
         """The regular grid's sum with first hits found by scan conversion
         (:func:`raycast._direct_kernels.raster_hits`) instead of rays; shadow rays as ever."""
         h = self.pixel_size_m
-        inner = self._state["inner"]
+        inner, smooth = self._state["inner"], self._state["smooth"]
         drawn = ~np.where(cos_o >= 0.0, inner[:, :1], inner[:, 1:])
         depth = _products(mesh.vertices_m - mesh.center_m, obs_body)
-        corners = mesh.corners_m
         result = np.zeros(len(sun_body))
         # Hits on flat-shaded triangles take their radiance from a table per (frame, triangle).
-        flat = np.flatnonzero(~self._state["smooth"])
-        flat_table = self._flat_radiance(sun_body, obs_body, flat) if len(flat) else None
+        flat_table = self._flat_radiance(sun_body, obs_body, np.flatnonzero(~smooth))
+        offset = 1e-4 * max(mesh.radius_m, 1.0)
         # Frames in batches of at most _MAX_RAYS_PER_BATCH pixels (the hit buffers' size).
         pixels = np.cumsum(n_u * n_v)
         begin = 0
         while begin < len(sun_body):
             end = max(begin + 1, int(np.searchsorted(pixels, pixels[begin] - n_u[begin] * n_v[begin]
                                                      + _MAX_RAYS_PER_BATCH, side="right")))
-            frames, prim, uv, points = _direct_kernels.raster_hits(
-                corners, pu, pv, depth, start_u, start_v, h, n_u, n_v, np.arange(begin, end), drawn, sunward)
+            frames, prim, uv, shadow_rays = _direct_kernels.raster_hits(
+                mesh.corners_m, pu, pv, depth, start_u, start_v, h, n_u, n_v, np.arange(begin, end), drawn, sunward,
+                mesh.face_normals, obs_body, sun_body, offset)
             begin = end
             if len(frames) == 0:
                 continue
-            contribution, _ = self._shade(mesh, scene, frames, prim, uv, points, sun_body, obs_body, flat_table)
-            result += np.bincount(frames, weights=contribution, minlength=len(result))
+            blocked = scene.test_occlusions(shadow_rays).numpy()
+            rest = _direct_kernels.flat_sums(frames, prim, blocked, smooth, flat_table, result)
+            if len(rest):
+                frames, prim = frames[rest], prim[rest]
+                normals = mesh.face_normals[prim] * np.where(cos_o[prim, frames] < 0.0, -1.0, 1.0)[:, None]
+                _direct_kernels.interpolated_normals(normals, np.arange(len(rest)), prim, uv[rest], mesh.corner_normals)
+                result += np.bincount(frames, weights=self._radiance(mesh.material_index[prim], normals, frames,
+                                                                     sun_body, obs_body), minlength=len(result))
         return result * h * h
 
     def _sampler(self):

@@ -60,3 +60,16 @@ def test_tile_rays_and_their_hits():
     np.testing.assert_array_equal(hit, [1, 3])
     np.testing.assert_array_equal(prim, [8, 10])
     np.testing.assert_allclose(end, points, rtol=1e-6)
+
+
+def test_flat_sums_add_unblocked_flat_hits_and_return_the_smooth_ones():
+    frames = np.array([0, 0, 1, 1, 1, 2])
+    prim = np.array([0, 1, 0, 2, 1, 0])
+    blocked = np.array([False, False, True, False, False, False])
+    smooth = np.array([False, True, False])
+    table = np.arange(9, dtype=float).reshape(3, 3) + 1.0
+    out = np.full(3, 0.5)
+    rest = _direct_kernels.flat_sums(frames, prim, blocked, smooth, table, out)
+    # Flat, unblocked: (0, 0) -> 1, (1, 2) -> 6, (2, 0) -> 7; the blocked (1, 0) adds nothing.
+    np.testing.assert_array_equal(out, [1.5, 6.5, 7.5])
+    np.testing.assert_array_equal(rest, [1, 4])

@@ -190,18 +190,23 @@ def test_grid_skips_only_tiles_whose_hits_face_away_from_the_sun(monkeypatch):
     assert counted["sunward"] < 0.9 * counted["every"]
 
 
-def _hit_table(renderer, sun, obs):
+def _hit_table(renderer, sun, obs, monkeypatch):
     """The light curve, and a Counter of (frame, triangle) over the sunward first hits of the
     regular grid, found by rays (``sampling="grid"``) or by scan conversion (``"raster"``)."""
+    from raycast import _direct_kernels
+
     recorded = Counter()
-    shade = renderer._shade
+    name = "ray_hits" if renderer.sampling == "grid" else "raster_hits"
+    finder = getattr(_direct_kernels, name)
 
-    def recording(mesh, scene, frames, prim, *args, **kwargs):
-        recorded.update(zip(frames.tolist(), prim.tolist()))
-        return shade(mesh, scene, frames, prim, *args, **kwargs)
+    def recording(*args):
+        found = finder(*args)
+        recorded.update(zip(found[0].tolist(), found[1].tolist()))
+        return found
 
-    object.__setattr__(renderer, "_shade", recording)
+    monkeypatch.setattr(_direct_kernels, name, recording)
     total = renderer.intensity(sun, obs)
+    monkeypatch.setattr(_direct_kernels, name, finder)
     sunward = Counter()
     mesh = renderer.scene.posed()
     for (frame, triangle), count in recorded.items():
@@ -212,7 +217,7 @@ def _hit_table(renderer, sun, obs):
 
 
 @pytest.mark.parametrize("model", ["topex", "cosmos2502"])
-def test_scan_conversion_finds_the_same_first_hits_as_rays(model):
+def test_scan_conversion_finds_the_same_first_hits_as_rays(model, monkeypatch):
     # The raster sampling must be the regular grid, hit for hit: the same triangle at the
     # same pixels (up to a pixel centred on an edge to float32 precision), so the same sum.
     if model == "topex":
@@ -221,8 +226,8 @@ def test_scan_conversion_finds_the_same_first_hits_as_rays(model):
         scene = Scene.from_file(MODELS / "cosmos2502_lotos.obj", materials=MODELS / "cosmos2502_lotos.materials.json")
     rng = np.random.default_rng(11)
     sun, obs = unit(rng.normal(size=(5, 3))), unit(rng.normal(size=(5, 3)))
-    rays, by_rays = _hit_table(DirectRenderer(scene, 0.03, sampling="grid"), sun, obs)
-    raster, by_raster = _hit_table(DirectRenderer(scene, 0.03, sampling="raster"), sun, obs)
+    rays, by_rays = _hit_table(DirectRenderer(scene, 0.03, sampling="grid"), sun, obs, monkeypatch)
+    raster, by_raster = _hit_table(DirectRenderer(scene, 0.03, sampling="raster"), sun, obs, monkeypatch)
     hits = sum(by_rays.values())
     assert hits > 10_000
     # COSMOS 2502's cross is two boxes whose faces overlap in one plane: there either face is
