@@ -121,7 +121,8 @@ def cycles_mesh(scene):
                                   corner_normals=mesh.corner_normals, material_names=scene.material_names)
 
 
-def bench_model(name, scene, rows, pixels, grid_pixels, grids, cycles_samples, cycles_frames, reference_pixel):
+def bench_model(name, scene, rows, pixels, grid_pixels, raster_pixels, grids, cycles_samples, cycles_frames,
+                reference_pixel):
     """All measurements of one model on one stretch of the pass; returns result rows and the
     reference's convergence (RMS mag between it and twice its pixel size)."""
     sun, obs = pass_directions(ATTITUDES[name], rows)
@@ -132,7 +133,8 @@ def bench_model(name, scene, rows, pixels, grid_pixels, grids, cycles_samples, c
     converged = rms_mag(check, reference)
     print(f"  reference rendered in {ref_wall:.1f} s; twice its pixel differs by {converged:.5f} mag", flush=True)
     results, caches = [], {}
-    for method, sampling, sizes in (("direct", "adaptive", pixels), ("direct-grid", "grid", grid_pixels)):
+    for method, sampling, sizes in (("direct", "adaptive", pixels), ("direct-grid", "grid", grid_pixels),
+                                    ("direct-raster", "raster", raster_pixels)):
         for pixel in sizes:
             values, wall, cpu = timed(lambda: DirectRenderer(scene, pixel, sampling=sampling).intensity(sun, obs),
                                       repeats=3)
@@ -179,6 +181,7 @@ def chart(results, path):
     fig, axes = plt.subplots(1, len(models), figsize=(6 * len(models), 5.4), squeeze=False)
     styles = {"direct": ("o-", "C0", "direct ray casting, adaptive (pixel sizes)"),
               "direct-grid": ("o:", "C7", "direct ray casting, regular grid (pixel sizes)"),
+              "direct-raster": ("D-", "C1", "direct, regular grid scan-converted + shadow rays (pixel sizes)"),
               "cached": ("s-", "C2", "cached fast path (grid sizes)"),
               "cycles": ("^-", "C3", "Blender Cycles CPU (samples)")}
     for ax, model in zip(axes[0], models):
@@ -243,7 +246,7 @@ def time_at_error(rows, error_mag, key="cpu_s"):
 
 def verdict(rows, method, target_mag, target_s):
     """One sentence: does ``method`` meet its target, and how much faster than Cycles at equal accuracy."""
-    # "direct" covers both of its samplings ("direct" adaptive, "direct-grid").
+    # "direct" covers all of its samplings ("direct" adaptive, "direct-grid", "direct-raster").
     mine = [r for r in rows if r["method"].split("-")[0] == method]
     cycles = [r for r in rows if r["method"] == "cycles"]
     met = [r for r in mine if r["error_mag"] <= target_mag]
@@ -275,7 +278,8 @@ def table(results, load, peak_mb, convergence):
              f"adaptive direct renderer at 4 mm, smooth tolerance 0.001 mag; at 8 mm it differs by "
              + ", ".join(f"{v:.5f} mag on {k}" for k, v in convergence.items()) +
              f"), over frames brighter than {DARK_FRACTION:g} of the peak; \"direct\" is the adaptive sampling, "
-             f"\"direct-grid\" the regular grid at the same pixel sizes; Cycles times are per "
+             f"\"direct-grid\" the regular grid, \"direct-raster\" the same grid with its first hits found by scan "
+             f"conversion (shadow rays unchanged); Cycles times are per "
              f"frame on a subset times the frame count (CPU summed over Blender's threads). Speed ratios are "
              f"taken at equal accuracy on CPU time: Cycles' time to reach each method's error, interpolated "
              f"log-log on its curve (extrapolated as error**-2 beyond its least accurate setting). "
@@ -335,6 +339,7 @@ def main(argv=None):
         rows, caches, converged = bench_model(
             name, scene, short, pixels=(0.1,) if quick else (0.12, 0.06, 0.03, 0.015),
             grid_pixels=(0.1,) if quick else (0.06, 0.045, 0.03),
+            raster_pixels=(0.1,) if quick else (0.06, 0.045, 0.03, 0.02),
             grids=((16, 1, None),) if quick else ((16, 1, None), (32, 1, None), (48, 1, None), (32, 2, None),
                                                    (32, 1, 0.15)),
             cycles_samples=() if args.no_cycles else ((4,) if quick else (4, 16, 64)),
@@ -356,7 +361,12 @@ def main(argv=None):
             values, wall, cpu = timed(lambda: DirectRenderer(scene, 0.03).intensity(sun, obs))
             results.append(dict(model=name, frames=len(long), method="direct", setting="pixel 0.03 m", wall_s=wall,
                                 cpu_s=cpu, setup_s=0.0, error_mag=rms_mag(values[subset], reference), memory_mb=0.0))
-            print(f"  long pass: cached {results[-2]['wall_s']:.2f} s / direct {results[-1]['wall_s']:.1f} s", flush=True)
+            values, wall, cpu = timed(lambda: DirectRenderer(scene, 0.03, sampling="raster").intensity(sun, obs))
+            results.append(dict(model=name, frames=len(long), method="direct-raster", setting="pixel 0.03 m",
+                                wall_s=wall, cpu_s=cpu, setup_s=0.0, error_mag=rms_mag(values[subset], reference),
+                                memory_mb=0.0))
+            print(f"  long pass: cached {results[-3]['wall_s']:.2f} s / direct {results[-2]['wall_s']:.1f} s / "
+                  f"direct-raster {results[-1]['wall_s']:.1f} s", flush=True)
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     if quick:
         for r in results:
