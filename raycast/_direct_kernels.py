@@ -269,3 +269,77 @@ def flat_sums(frames, prim, blocked, smooth, flat_table, out):
         else:
             out[frames[n]] += flat_table[frames[n], t]
     return rest[:count]
+
+
+@njit(cache=True, nogil=True)
+def need_shadow_rays(corners, group, sun, axis_u, axis_v, cell, owners, prim, shadow_rays):
+    """(k,) bool: which hits' shadow rays can meet something; the others are lit for certain.
+
+    Per frame the triangles are binned, seen from the Sun, into square cells of side ``cell``
+    (each into every cell its bounding box touches) and every cell keeps the highest point
+    toward the Sun of the two highest *groups* in it: a group is a closed convex part (which
+    cannot shade its own sunlit side) or a single triangle. A hit whose own cell holds nothing
+    of another group above the hit cannot be shaded: its shadow ray would leave the cell's
+    column only above all of it.
+
+    Parameters
+    ----------
+    corners : (t, 3, 3) float, triangle corners (body frame).
+    group : (t,) int, each triangle's group.
+    sun, axis_u, axis_v : (m, 3) float, the Sun and two axes across it, per frame.
+    cell : float, cell side (m).
+    owners, prim : (k,) int, frame (ascending) and triangle of each hit.
+    shadow_rays : (k, 6) float32, the hits' shadow rays (origin, direction).
+    """
+    need = np.ones(len(owners), dtype=np.bool_)
+    n_tri = len(corners)
+    low_u, low_v = np.empty(n_tri), np.empty(n_tri)
+    high_u, high_v, top = np.empty(n_tri), np.empty(n_tri), np.empty(n_tri)
+    first = 0
+    while first < len(owners):
+        f = owners[first]
+        last = first
+        while last < len(owners) and owners[last] == f:
+            last += 1
+        min_u, min_v, max_u, max_v = np.inf, np.inf, -np.inf, -np.inf
+        for t in range(n_tri):
+            low_u[t], low_v[t], high_u[t], high_v[t], top[t] = np.inf, np.inf, -np.inf, -np.inf, -np.inf
+            for c in range(3):
+                pu = corners[t, c, 0] * axis_u[f, 0] + corners[t, c, 1] * axis_u[f, 1] + corners[t, c, 2] * axis_u[f, 2]
+                pv = corners[t, c, 0] * axis_v[f, 0] + corners[t, c, 1] * axis_v[f, 1] + corners[t, c, 2] * axis_v[f, 2]
+                ps = corners[t, c, 0] * sun[f, 0] + corners[t, c, 1] * sun[f, 1] + corners[t, c, 2] * sun[f, 2]
+                low_u[t], high_u[t] = min(low_u[t], pu), max(high_u[t], pu)
+                low_v[t], high_v[t] = min(low_v[t], pv), max(high_v[t], pv)
+                top[t] = max(top[t], ps)
+            min_u, max_u = min(min_u, low_u[t]), max(max_u, high_u[t])
+            min_v, max_v = min(min_v, low_v[t]), max(max_v, high_v[t])
+        n_u = int((max_u - min_u) / cell) + 1
+        n_v = int((max_v - min_v) / cell) + 1
+        first_top = np.full(n_u * n_v, -np.inf)
+        first_group = np.full(n_u * n_v, -1, dtype=np.int64)
+        second_top = np.full(n_u * n_v, -np.inf)
+        for t in range(n_tri):
+            g, z = group[t], top[t]
+            for i in range(int((low_u[t] - min_u) / cell), int((high_u[t] - min_u) / cell) + 1):
+                for j in range(int((low_v[t] - min_v) / cell), int((high_v[t] - min_v) / cell) + 1):
+                    k = i * n_v + j
+                    if g == first_group[k]:
+                        first_top[k] = max(first_top[k], z)
+                    elif z > first_top[k]:
+                        second_top[k] = first_top[k]
+                        first_top[k], first_group[k] = z, g
+                    else:
+                        second_top[k] = max(second_top[k], z)
+        for n in range(first, last):
+            x, y, w = shadow_rays[n, 0], shadow_rays[n, 1], shadow_rays[n, 2]
+            pu = x * axis_u[f, 0] + y * axis_u[f, 1] + w * axis_u[f, 2]
+            pv = x * axis_v[f, 0] + y * axis_v[f, 1] + w * axis_v[f, 2]
+            ps = x * sun[f, 0] + y * sun[f, 1] + w * sun[f, 2]
+            i, j = int((pu - min_u) / cell), int((pv - min_v) / cell)
+            if i < 0 or j < 0 or i >= n_u or j >= n_v:
+                continue
+            k = i * n_v + j
+            other = second_top[k] if first_group[k] == group[prim[n]] else first_top[k]
+            need[n] = other > ps
+        first = last
+    return need

@@ -288,6 +288,14 @@ class DirectRenderer:
         # Hits on flat-shaded triangles take their radiance from a table per (frame, triangle).
         flat_table = self._flat_radiance(sun_body, obs_body, np.flatnonzero(~smooth))
         offset = 1e-4 * max(mesh.radius_m, 1.0)
+        corners = mesh.corners_m
+        # Sorting out the hits that need no shadow ray pays where closed convex parts hold most
+        # of the surface (TOPEX: 70% of the rays saved); on open meshes nearly every hit needs one.
+        groups = self._state["groups"]
+        convex_share = mesh.areas_m2[groups <= mesh.part_index.max()].sum() / max(mesh.areas_m2.sum(), 1e-300)
+        groups = groups if convex_share >= 0.5 else None
+        sun_u, sun_v = orthonormal_basis(sun_body)
+        cell = max(4.0 * h, mesh.radius_m / 64.0)
         # Frames in batches of at most _MAX_RAYS_PER_BATCH pixels (the hit buffers' size).
         pixels = np.cumsum(n_u * n_v)
         begin = 0
@@ -295,12 +303,18 @@ class DirectRenderer:
             end = max(begin + 1, int(np.searchsorted(pixels, pixels[begin] - n_u[begin] * n_v[begin]
                                                      + _MAX_RAYS_PER_BATCH, side="right")))
             frames, prim, uv, shadow_rays = _direct_kernels.raster_hits(
-                mesh.corners_m, pu, pv, depth, start_u, start_v, h, n_u, n_v, np.arange(begin, end), drawn, sunward,
+                corners, pu, pv, depth, start_u, start_v, h, n_u, n_v, np.arange(begin, end), drawn, sunward,
                 mesh.face_normals, obs_body, sun_body, offset)
             begin = end
             if len(frames) == 0:
                 continue
-            blocked = scene.test_occlusions(shadow_rays).numpy()
+            # Shadow rays only where something of another group rises above the hit.
+            need = (_direct_kernels.need_shadow_rays(corners, groups, sun_body, sun_u, sun_v, cell, frames, prim,
+                                                     shadow_rays)
+                    if groups is not None else np.ones(len(frames), dtype=bool))
+            blocked = np.zeros(len(frames), dtype=bool)
+            if need.any():
+                blocked[need] = scene.test_occlusions(shadow_rays[need]).numpy()
             rest = _direct_kernels.flat_sums(frames, prim, blocked, smooth, flat_table, result)
             if len(rest):
                 frames, prim = frames[rest], prim[rest]
@@ -422,6 +436,7 @@ class DirectRenderer:
             spread = np.abs(mesh.corner_normals - mesh.face_normals[:, None, :]).max(axis=(1, 2))
             self._state["smooth"] = spread > 1e-9
             self._state["inner"] = mesh.inner_sides()
+            self._state["groups"] = convex_groups(mesh, self._state["inner"])
             self._state["sun_samples"] = tuple(
                 sun_samples_for(b, self.accuracy_mag) if self.sun_samples is None else int(self.sun_samples)
                 for b in mesh.brdfs)
@@ -443,6 +458,26 @@ def sun_samples_for(brdf, accuracy_mag):
     if relative_effect < 0.1 * tolerance:
         return 1
     return 7 if relative_effect < 10.0 * tolerance else 24
+
+
+def convex_groups(mesh, inner):
+    """(t,) int: each triangle's group for :func:`raycast._direct_kernels.need_shadow_rays`,
+    its part's index when the part is closed and convex (every corner of the part on the inner
+    side of each of its face planes, to 1e-6 of the mesh's size), otherwise a group of its own.
+    ``inner`` is :meth:`raycast.scene.PosedMesh.inner_sides`."""
+    n_tri = len(mesh.part_index)
+    group = np.arange(n_tri) + (int(mesh.part_index.max()) + 1 if n_tri else 0)
+    tolerance = 1e-6 * max(mesh.radius_m, 1e-9)
+    for part in np.unique(mesh.part_index):
+        tris = np.flatnonzero(mesh.part_index == part)
+        if not inner[tris].any(axis=1).all():
+            continue
+        outward = np.where(inner[tris, 0:1], -1.0, 1.0) * mesh.face_normals[tris]
+        corners = mesh.corners_m[tris].reshape(-1, 3)
+        height = outward @ corners.T - np.einsum("tj,tj->t", outward, mesh.corners_m[tris, 0])[:, None]
+        if height.max() <= tolerance:
+            group[tris] = part
+    return group
 
 
 def _covered_tiles(mesh, pu, pv, start_u, start_v, tile_m, tiles_u, tiles_v, selected):

@@ -73,3 +73,44 @@ def test_flat_sums_add_unblocked_flat_hits_and_return_the_smooth_ones():
     # Flat, unblocked: (0, 0) -> 1, (1, 2) -> 6, (2, 0) -> 7; the blocked (1, 0) adds nothing.
     np.testing.assert_array_equal(out, [1.5, 6.5, 7.5])
     np.testing.assert_array_equal(rest, [1, 4])
+
+
+def _box_corners(low, high):
+    """(12, 3, 3) corners of an axis-aligned box's triangles (winding irrelevant here)."""
+    lo, hi = np.asarray(low, float), np.asarray(high, float)
+    corners = []
+    for axis in range(3):
+        a, b = [x for x in range(3) if x != axis]
+        for level in (lo[axis], hi[axis]):
+            quad = []
+            for da, db in ((0, 0), (1, 0), (1, 1), (0, 1)):
+                p = np.empty(3)
+                p[axis], p[a], p[b] = level, (lo[a], hi[a])[da], (lo[b], hi[b])[db]
+                quad.append(p)
+            corners += [[quad[0], quad[1], quad[2]], [quad[0], quad[2], quad[3]]]
+    return np.array(corners)
+
+
+def test_need_shadow_rays_only_under_another_group():
+    # A 4 x 4 m block (group 0) with a 1 x 1 m plate (group 1) hovering 1 m above its left
+    # half; the Sun straight above. Hits on the block's top under the plate need a shadow ray;
+    # hits elsewhere on the top, and on the plate itself, are lit for certain.
+    block = _box_corners([-2, -2, -1], [2, 2, 0])
+    plate = _box_corners([-1.5, -0.5, 1.0], [-0.5, 0.5, 1.05])
+    corners = np.concatenate([block, plate])
+    group = np.r_[np.zeros(12, int), np.ones(12, int)]
+    sun = np.array([[0.0, 0.0, 1.0]])
+    axis_u, axis_v = np.array([[1.0, 0.0, 0.0]]), np.array([[0.0, 1.0, 0.0]])
+    top_of_block = 2 * 2 + 1  # the +z face of the block: triangles 10 and 11 (axis 2, upper level)
+    side_of_block = 2 * 0 + 1  # the +x face: triangles 2 and 3
+    points = np.array([[-1.0, 0.0, 0.0], [1.5, 1.5, 0.0], [-1.0, 0.0, 1.05], [-1.0, 1.2, 0.0], [2.0, 1.5, -0.5]])
+    prim = np.array([top_of_block, top_of_block, 23, top_of_block, 2 * side_of_block])
+    rays = np.concatenate([points + [0, 0, 1e-4], np.broadcast_to(sun, points.shape)], axis=1).astype(np.float32)
+    need = _direct_kernels.need_shadow_rays(corners, group, sun, axis_u, axis_v, 0.25, np.zeros(5, int), prim, rays)
+    # Under the plate: yes; far corner: no; on the plate: no; 0.7 m beside the plate, two cells
+    # off: no; on the block's side below its own top: no (a convex part shades none of itself).
+    np.testing.assert_array_equal(need, [True, False, False, False, False])
+    # Were the block not one convex group but triangles of their own, its top would count.
+    group[:12] = np.arange(2, 14)
+    need = _direct_kernels.need_shadow_rays(corners, group, sun, axis_u, axis_v, 0.25, np.zeros(5, int), prim, rays)
+    np.testing.assert_array_equal(need, [True, False, False, False, True])

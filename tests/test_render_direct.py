@@ -258,3 +258,29 @@ def test_scan_conversion_leaves_out_the_inner_sides_of_closed_parts_only():
     raster = DirectRenderer(scene, 0.005, sampling="raster").intensity(sun, obs)
     np.testing.assert_allclose(raster, rays, rtol=1e-3)
     assert (raster > 0.0).all()
+
+
+def test_hits_spared_a_shadow_ray_are_lit(monkeypatch):
+    # TOPEX's parts are closed convex boxes (all but the dish): most sunlit hits need no shadow
+    # ray. Sparing them must leave the light curve exactly as with every ray cast.
+    from raycast import _direct_kernels
+
+    scene = topex.build()
+    rng = np.random.default_rng(3)
+    sun, obs = unit(rng.normal(size=(8, 3))), unit(rng.normal(size=(8, 3)))
+    asked = []
+    need = _direct_kernels.need_shadow_rays
+
+    def recording(*args):
+        result = need(*args)
+        asked.append((result.sum(), len(result)))
+        return result
+
+    monkeypatch.setattr(_direct_kernels, "need_shadow_rays", recording)
+    spared = DirectRenderer(scene, 0.03, sampling="raster").intensity(sun, obs)
+    monkeypatch.setattr(_direct_kernels, "need_shadow_rays", lambda *args: np.ones(len(args[6]), dtype=bool))
+    every = DirectRenderer(scene, 0.03, sampling="raster").intensity(sun, obs)
+    np.testing.assert_allclose(spared, every, rtol=1e-12)
+    needed, hits = np.sum(asked, axis=0)
+    assert needed < 0.6 * hits
+    assert np.count_nonzero(spared) >= 4
