@@ -284,3 +284,27 @@ def test_hits_spared_a_shadow_ray_are_lit(monkeypatch):
     needed, hits = np.sum(asked, axis=0)
     assert needed < 0.6 * hits
     assert np.count_nonzero(spared) >= 4
+
+
+def test_convex_groups_are_closed_convex_parts():
+    from raycast.direct import convex_groups
+
+    # A box and a sphere are closed and convex; a plate is open; a box with one corner pushed
+    # inward is closed but dented. Each triangle outside a convex part is a group of its own.
+    box = Part.box("box", (2.0, 1.0, 1.0), "paint")
+    corners = box.corners_m.copy()
+    corner = np.array([1.0, 0.5, 0.5])
+    corners[np.all(np.isclose(corners, corner), axis=2)] = [0.6, 0.2, 0.2]
+    dented = Part._flat("dented", corners, box.materials).transformed(offset_m=(0.0, 3.0, 0.0))
+    parts = [box, Part.sphere("ball", 0.5, "paint").transformed(offset_m=(3.0, 0.0, 0.0)),
+             Part.plate("sheet", 1.0, 1.0, "paint").transformed(offset_m=(0.0, 0.0, 3.0)), dented]
+    mesh = Scene.from_parts(parts, {"paint": Lambertian(0.5)}).posed()
+    inner = mesh.inner_sides()
+    assert inner[mesh.part_index == 3].any(axis=1).all()  # the dented box is still closed
+    group = convex_groups(mesh, inner)
+    for part, convex in enumerate((True, True, False, False)):
+        tris = np.flatnonzero(mesh.part_index == part)
+        if convex:
+            assert (group[tris] == part).all()
+        else:
+            assert len(np.unique(group[tris])) == len(tris) and (group[tris] >= len(parts)).all()
