@@ -128,8 +128,9 @@ def bench_model(name, scene, rows, pixels, grid_pixels, raster_pixels, grids, cy
     sun, obs = pass_directions(ATTITUDES[name], rows)
     n = len(sun)
     print(f"\n{name}: {n} frames, reference pixel {reference_pixel} m", flush=True)
-    reference, ref_wall, _ = timed(lambda: DirectRenderer(scene, reference_pixel, accuracy_mag=0.001).intensity(sun, obs))
-    check = DirectRenderer(scene, 2 * reference_pixel, accuracy_mag=0.001).intensity(sun, obs)
+    reference, ref_wall, _ = timed(lambda: DirectRenderer(scene, reference_pixel, accuracy_mag=0.001,
+                                                                  sampling="adaptive").intensity(sun, obs))
+    check = DirectRenderer(scene, 2 * reference_pixel, accuracy_mag=0.001, sampling="adaptive").intensity(sun, obs)
     converged = rms_mag(check, reference)
     print(f"  reference rendered in {ref_wall:.1f} s; twice its pixel differs by {converged:.5f} mag", flush=True)
     results, caches = [], {}
@@ -351,7 +352,8 @@ def main(argv=None):
             # reference resolution would take most of the run); times are for all 2320 frames.
             subset = long[::10]
             sun, obs = pass_directions(ATTITUDES[name], long)
-            reference = DirectRenderer(scene, 0.004, accuracy_mag=0.001).intensity(sun[subset], obs[subset])
+            reference = DirectRenderer(scene, 0.004, accuracy_mag=0.001, sampling="adaptive").intensity(sun[subset],
+                                                                                                   obs[subset])
             cache = caches[32]
             build = cache.precompute_s
             values, wall, cpu = timed(lambda: cache.intensity(sun, obs), repeats=3)

@@ -155,7 +155,7 @@ class DirectRenderer:
     # ---------------------------------------------------------------- construction
     @classmethod
     def from_accuracy(cls, scene, sun_body, obs_body, accuracy_mag=0.005, n_pilot=8,
-                      max_pixels_per_frame=4_000_000, sun_samples=None) -> "DirectRenderer":
+                      max_pixels_per_frame=4_000_000, sun_samples=None, sampling="adaptive") -> "DirectRenderer":
         """A renderer whose pixel size meets ``accuracy_mag`` on these directions.
 
         The frames are rendered once on a coarse grid; a pilot set (the brightest half and an
@@ -176,14 +176,14 @@ class DirectRenderer:
         mesh = scene.posed()
         footprint = 2.0 * mesh.radius_m
         pixel = footprint / 48.0
-        coarse = cls(scene, pixel, sun_samples, accuracy_mag).intensity(sun_body, obs_body)
+        coarse = cls(scene, pixel, sun_samples, accuracy_mag, sampling).intensity(sun_body, obs_body)
         lit = np.flatnonzero(coarse > 0.0)
         if len(lit) == 0:
-            return cls(scene, pixel, sun_samples, accuracy_mag)
+            return cls(scene, pixel, sun_samples, accuracy_mag, sampling)
         brightest = lit[np.argsort(coarse[lit])[::-1][: n_pilot // 2]]
         spread = lit[np.linspace(0, len(lit) - 1, n_pilot - len(brightest)).astype(int)]
         pilot = np.unique(np.concatenate([brightest, spread]))
-        previous = cls(scene, pixel, sun_samples, accuracy_mag).intensity(sun_body[pilot], obs_body[pilot])
+        previous = cls(scene, pixel, sun_samples, accuracy_mag, sampling).intensity(sun_body[pilot], obs_body[pilot])
         change = math.inf
         while True:
             pixel /= 2.0
@@ -197,13 +197,13 @@ class DirectRenderer:
                     f"{reached} (a glint or shadow edge narrower than the sampling); {relax}, raise "
                     f"max_pixels_per_frame to at least "
                     f"{math.ceil((footprint / pixel) ** 2)} for one more halving, or give pixel_size_m directly")
-            current = cls(scene, pixel, sun_samples, accuracy_mag).intensity(sun_body[pilot], obs_body[pilot])
+            current = cls(scene, pixel, sun_samples, accuracy_mag, sampling).intensity(sun_body[pilot], obs_body[pilot])
             both = (current > 0.0) & (previous > 0.0)
             change = math.inf
             if np.array_equal(current > 0.0, previous > 0.0):
                 change = np.abs(2.5 * np.log10(current[both] / previous[both])).max() if both.any() else 0.0
                 if change < accuracy_mag:
-                    return cls(scene, pixel, sun_samples, accuracy_mag)
+                    return cls(scene, pixel, sun_samples, accuracy_mag, sampling)
             previous = current
 
     # ---------------------------------------------------------------- rendering

@@ -308,3 +308,23 @@ def test_convex_groups_are_closed_convex_parts():
             assert (group[tris] == part).all()
         else:
             assert len(np.unique(group[tris])) == len(tris) and (group[tris] >= len(parts)).all()
+
+
+def test_render_scan_converts_small_meshes_and_samples_large_ones_adaptively(monkeypatch):
+    from raycast import render as render_module
+
+    scene = topex.build()
+    rng = np.random.default_rng(4)
+    sun, obs = unit(rng.normal(size=(6, 3))), unit(rng.normal(size=(6, 3)))
+    small = render(scene, geometry(sun, obs), method="direct", pixel_size_m=0.03)
+    monkeypatch.setattr(render_module, "RASTER_MAX_TRIANGLES", scene.n_triangles - 1)
+    large = render(scene, geometry(sun, obs), method="direct", pixel_size_m=0.03)
+    assert small.settings["sampling"] == "raster" and large.settings["sampling"] == "adaptive"
+    np.testing.assert_array_equal(small.intensity_m2_sr,
+                                  DirectRenderer(scene, 0.03, sampling="raster").intensity(sun, obs))
+    lit = large.intensity_m2_sr > 0.0
+    assert lit.sum() >= 3
+    # Two samplings of one integral at 3 cm: within their edge errors (a few pixels' worth,
+    # which is much of a frame that shows only a sliver).
+    np.testing.assert_allclose(small.intensity_m2_sr[lit], large.intensity_m2_sr[lit], rtol=0.02,
+                               atol=1e-3 * large.intensity_m2_sr.max())
