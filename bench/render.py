@@ -280,7 +280,7 @@ def table(results, load, peak_mb, convergence):
              + ", ".join(f"{v:.5f} mag on {k}" for k, v in convergence.items()) +
              f"), over frames brighter than {DARK_FRACTION:g} of the peak; \"direct\" is the adaptive sampling, "
              f"\"direct-grid\" the regular grid, \"direct-raster\" the same grid with its first hits found by scan "
-             f"conversion (shadow rays unchanged); Cycles times are per "
+             f"conversion (shadow rays only where another part can shade); Cycles times are per "
              f"frame on a subset times the frame count (CPU summed over Blender's threads). Speed ratios are "
              f"taken at equal accuracy on CPU time: Cycles' time to reach each method's error, interpolated "
              f"log-log on its curve (extrapolated as error**-2 beyond its least accurate setting). "

@@ -17,6 +17,9 @@ how many points is chosen per material by :func:`sun_samples_for`), which gives 
 The shadow ray is not spread over the disk: the penumbra it would blur is 0.0093 rad times the
 distance to the occluder, under 1 cm on a body of 10 m, far below any pixel size used here.
 
+With ``sampling="raster"`` the same grid's first hits are found by scan conversion with a
+depth test instead of rays (the same hits; see :meth:`DirectRenderer._raster`).
+
 The pixel grid of each direction pair is shifted by a low-discrepancy (R2) sub-pixel offset, so
 edge errors of successive frames do not repeat; the result is deterministic.
 
@@ -130,8 +133,8 @@ class DirectRenderer:
         (:mod:`raycast.refine`); ``"grid"``: every pixel of the regular grid, the plain reference
         the adaptive sampler is tested against; ``"raster"``: the same grid with its first hits
         found by scan conversion with a depth test (:func:`raycast._direct_kernels.raster_hits`)
-        instead of rays, hit for hit the grid's, with shadow rays as ever: the fastest for
-        meshes of up to a few thousand triangles.
+        instead of rays, hit for hit the grid's, with shadow rays only where another part can
+        shade: the fastest for meshes of up to a few thousand triangles.
     """
 
     scene: Scene
@@ -279,7 +282,9 @@ class DirectRenderer:
 
     def _raster(self, mesh, scene, sun_body, obs_body, pu, pv, start_u, start_v, n_u, n_v, cos_o, sunward):
         """The regular grid's sum with first hits found by scan conversion
-        (:func:`raycast._direct_kernels.raster_hits`) instead of rays; shadow rays as ever."""
+        (:func:`raycast._direct_kernels.raster_hits`) instead of rays, and shadow rays only for
+        hits something of another convex group can shade
+        (:func:`raycast._direct_kernels.need_shadow_rays`)."""
         h = self.pixel_size_m
         inner, smooth = self._state["inner"], self._state["smooth"]
         drawn = ~np.where(cos_o >= 0.0, inner[:, :1], inner[:, 1:])
