@@ -360,13 +360,11 @@ def main(argv=None):
             results.append(dict(model=name, frames=len(long), method="cached", setting="grid 32", wall_s=wall,
                                 cpu_s=cpu, setup_s=build, error_mag=rms_mag(values[subset], reference),
                                 memory_mb=cache.nbytes / 1e6))
-            values, wall, cpu = timed(lambda: DirectRenderer(scene, 0.03).intensity(sun, obs))
-            results.append(dict(model=name, frames=len(long), method="direct", setting="pixel 0.03 m", wall_s=wall,
-                                cpu_s=cpu, setup_s=0.0, error_mag=rms_mag(values[subset], reference), memory_mb=0.0))
-            values, wall, cpu = timed(lambda: DirectRenderer(scene, 0.03, sampling="raster").intensity(sun, obs))
-            results.append(dict(model=name, frames=len(long), method="direct-raster", setting="pixel 0.03 m",
-                                wall_s=wall, cpu_s=cpu, setup_s=0.0, error_mag=rms_mag(values[subset], reference),
-                                memory_mb=0.0))
+            for method, sampling in (("direct", "adaptive"), ("direct-raster", "raster")):
+                values, wall, cpu = timed(lambda: DirectRenderer(scene, 0.03, sampling=sampling).intensity(sun, obs))
+                results.append(dict(model=name, frames=len(long), method=method, setting="pixel 0.03 m",
+                                    wall_s=wall, cpu_s=cpu, setup_s=0.0, error_mag=rms_mag(values[subset], reference),
+                                    memory_mb=0.0))
             print(f"  long pass: cached {results[-3]['wall_s']:.2f} s / direct {results[-2]['wall_s']:.1f} s / "
                   f"direct-raster {results[-1]['wall_s']:.1f} s", flush=True)
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0

@@ -297,10 +297,10 @@ class DirectRenderer:
         # Sorting out the hits that need no shadow ray pays where closed convex parts hold most
         # of the surface (TOPEX: 70% of the rays saved); on open meshes nearly every hit needs one.
         if "groups" not in self._state:
-            self._state["groups"] = convex_groups(mesh, inner)
+            groups = convex_groups(mesh, inner)
+            convex_share = mesh.areas_m2[groups <= mesh.part_index.max()].sum() / max(mesh.areas_m2.sum(), 1e-300)
+            self._state["groups"] = groups if convex_share >= 0.5 else None
         groups = self._state["groups"]
-        convex_share = mesh.areas_m2[groups <= mesh.part_index.max()].sum() / max(mesh.areas_m2.sum(), 1e-300)
-        groups = groups if convex_share >= 0.5 else None
         sun_u, sun_v = orthonormal_basis(sun_body)
         cell = max(4.0 * h, mesh.radius_m / 64.0)
         # Frames in batches of at most _MAX_RAYS_PER_BATCH pixels (the hit buffers' size).
