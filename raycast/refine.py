@@ -272,11 +272,11 @@ class AdaptiveSampler:
         sun, obs = self._frame[:2]
         base, step_u, step_v, backward = self._rays
         rays = _direct_kernels.lattice_rays(base, step_u, step_v, backward, frame, i.astype(np.float32),
-                                     j.astype(np.float32))
+                                            j.astype(np.float32))
         hits = self.raycaster.cast_rays(rays)
         self.n_rays += len(rays)
         hit, prim, uv, points = _direct_kernels.ray_hits(rays, hits["t_hit"].numpy(), hits["primitive_ids"].numpy(),
-                                                     hits["primitive_uvs"].numpy(), np.arange(len(rays)), 1)
+                                                         hits["primitive_uvs"].numpy(), np.arange(len(rays)), 1)
         cls = np.full(len(frame), -1, dtype=np.int64)
         value = np.zeros(len(frame))
         if len(hit):
