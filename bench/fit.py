@@ -22,6 +22,7 @@ Measured in the same run:
 The machine is shared with other work: wall times depend on its load (printed); CPU times
 are this process's own.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -43,15 +44,23 @@ BENCHMARKS = ROOT / "docs" / "benchmarks.md"
 TOPEX_PHV = ROOT.parent / "shared" / "data" / "observations" / "result_22076_20240730_UT212240.phV"
 TARGET_S = 600.0
 PAPER_S = 20 * 3600.0
-TRUTH = {"spin_period_s": 9.86, "spin_phase_deg": 120.0, "precession_period_s": 689.0,
-         "precession_phase_deg": 180.0, "precession_angle_deg": 35.0, "panel_pitch_deg": 12.0}
+TRUTH = {
+    "spin_period_s": 9.86,
+    "spin_phase_deg": 120.0,
+    "precession_period_s": 689.0,
+    "precession_phase_deg": 180.0,
+    "precession_angle_deg": 35.0,
+    "panel_pitch_deg": 12.0,
+}
 
 
 def config_record(n_sub: int, steps: int, walkers: int, processes: int) -> dict:
-    return {"name": "bench", "model": {"shape": "topex", "n_sub": n_sub},
-            "parameters": {"spin_period_s": {"kind": "uniform", "low": 9.86 * 0.99, "high": 9.86 * 1.01}},
-            "sampler": {"n_walkers": walkers, "n_steps": steps, "processes": processes, "seed": 1,
-                        "search_points": 60}}
+    return {
+        "name": "bench",
+        "model": {"shape": "topex", "n_sub": n_sub},
+        "parameters": {"spin_period_s": {"kind": "uniform", "low": 9.86 * 0.99, "high": 9.86 * 1.01}},
+        "sampler": {"n_walkers": walkers, "n_steps": steps, "processes": processes, "seed": 1, "search_points": 60},
+    }
 
 
 def timed(function, repeats: int) -> tuple[float, float]:
@@ -75,16 +84,17 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
 
     from ingest import read_file
-    from raycast.direct import DirectRenderer
+    from raycast.renderer.direct import DirectRenderer
     from rsodb.fit.config import FitConfig
-    from rsodb.fit.injection import inject, window
+    from rsodb.fit.coverage import inject, window
     from rsodb.fit.runner import FitProblem, fit_problem
 
     template = window(read_file(TOPEX_PHV)[0], 0.0, 30.0)
     truth_config = FitConfig.from_dict(config_record(16, 10, 20, 1))
     reference = FitProblem.build(template, truth_config)
-    observed = inject(template, reference.posterior.model, TRUTH, noise_mag=0.02, rng=np.random.default_rng(7),
-                      offset_mag=0.4)
+    observed = inject(
+        template, reference.posterior.model, TRUTH, noise_mag=0.02, rng=np.random.default_rng(7), offset_mag=0.4
+    )
     fine_mag = reference.posterior.model.magnitudes(TRUTH)
     print(f"pass: {len(template)} samples over {template.duration_s:.1f} s, exposure {template.exposure_s} s")
 
@@ -95,8 +105,10 @@ def main(argv=None) -> int:
         wall, cpu = timed(lambda: problem.posterior(theta), 10)
         error = float(np.sqrt(np.mean((problem.posterior.model.magnitudes(TRUTH) - fine_mag) ** 2)))
         rows.append((n_sub, wall, cpu, error))
-        print(f"posterior evaluation, cached, {n_sub} sub-samples: {wall * 1e3:.1f} ms wall, {cpu * 1e3:.1f} ms CPU, "
-              f"exposure-integration error {error:.4f} mag RMS vs 16 sub-samples")
+        print(
+            f"posterior evaluation, cached, {n_sub} sub-samples: {wall * 1e3:.1f} ms wall, {cpu * 1e3:.1f} ms CPU, "
+            f"exposure-integration error {error:.4f} mag RMS vs 16 sub-samples"
+        )
     # The peer: the direct ray caster on the same 150 frames (one sub-sample, 6 cm rays).
     body = reference.posterior.model.geometry.body_frame(reference.posterior.model.attitude_model(TRUTH))
     direct = DirectRenderer(reference.posterior.model.brightness.scene, 0.06)
@@ -112,19 +124,26 @@ def main(argv=None) -> int:
         fit_wall, fit_cpu = time.perf_counter() - wall, time.process_time() - cpu
     evaluations = result.n_evaluations
     print(result.table())
-    print(f"fit: {args.walkers} walkers x {args.steps} steps, {evaluations} posterior evaluations in "
-          f"{fit_wall:.0f} s wall ({fit_wall / 60:.1f} min; target {TARGET_S / 60:.0f} min: "
-          f"{'met' if fit_wall <= TARGET_S else 'MISSED'}); the published workflow: ~20 h, "
-          f"{PAPER_S / fit_wall:.0f}x longer")
+    print(
+        f"fit: {args.walkers} walkers x {args.steps} steps, {evaluations} posterior evaluations in "
+        f"{fit_wall:.0f} s wall ({fit_wall / 60:.1f} min; target {TARGET_S / 60:.0f} min: "
+        f"{'met' if fit_wall <= TARGET_S else 'MISSED'}); the published workflow: ~20 h, "
+        f"{PAPER_S / fit_wall:.0f}x longer"
+    )
     load = os.getloadavg()
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     if args.no_record:
         return 0
     truth_rows = "\n".join(
         f"| {name} | {TRUTH[name]:g} | {result.median[i]:.5g} | -{result.median[i] - result.p16[i]:.3g} / "
-        f"+{result.p84[i] - result.median[i]:.3g} |" for i, name in enumerate(result.names) if name in TRUTH)
-    eval_rows = "\n".join(f"| cached, {n} sub-sample(s) | {w * 1e3:.1f} | {c * 1e3:.1f} | {direct_wall / w:.0f}x | "
-                          f"{e:.4f} |" for n, w, c, e in rows)
+        f"+{result.p84[i] - result.median[i]:.3g} |"
+        for i, name in enumerate(result.names)
+        if name in TRUTH
+    )
+    eval_rows = "\n".join(
+        f"| cached, {n} sub-sample(s) | {w * 1e3:.1f} | {c * 1e3:.1f} | {direct_wall / w:.0f}x | {e:.4f} |"
+        for n, w, c, e in rows
+    )
     processes = args.processes or os.cpu_count()
     section = f"""
 ## Spin-state fit speed ({dt.date.today().isoformat()}, bench/fit.py)
@@ -140,7 +159,7 @@ Peak RSS of the main process {peak_mb:.0f} MB.
 | run | wall | CPU (main process) | posterior evaluations |
 |---|---|---|---|
 | this fit, end to end | {fit_wall:.0f} s ({fit_wall / 60:.1f} min) | {fit_cpu:.0f} s | {evaluations} |
-| target | {TARGET_S / 60:.0f} min | | {'met' if fit_wall <= TARGET_S else 'MISSED'} |
+| target | {TARGET_S / 60:.0f} min | | {"met" if fit_wall <= TARGET_S else "MISSED"} |
 | published workflow (Blender Cycles, GPU), same 20 x 500 | ~20 h | | 10000 |
 | ratio | {PAPER_S / fit_wall:.0f}x faster | | |
 

@@ -16,13 +16,13 @@ The acceptance band asked of the project is 50-85%.
 
 Trials run in a process pool (one per core); each is seeded, so a run is reproducible.
 """
+
 from __future__ import annotations
 
 import argparse
 import datetime as dt
 import os
 from pathlib import Path
-import platform
 import sys
 import tempfile
 import time
@@ -37,14 +37,32 @@ FIGURE = ROOT / "docs" / "img" / "fit_coverage.png"
 BAND = (0.50, 0.85)
 
 
-def config_record(shape: str, steps: int, walkers: int, init: str = "search", moves: str = "stretch",
-                  search_popsize: int = 15, search_maxiter: int = 100) -> dict:
-    return {"name": "coverage", "model": {"shape": shape, "n_sub": 1},
-            "parameters": {"spin_period_s": {"kind": "uniform", "low": 9.76, "high": 9.96},
-                           "precession_period_s": {"kind": "uniform", "low": 200.0, "high": 3000.0},
-                           "jitter_mag": {"kind": "uniform", "low": 0.0, "high": 0.03}},
-            "sampler": {"n_walkers": walkers, "n_steps": steps, "init": init, "moves": moves,
-                        "search_popsize": search_popsize, "search_maxiter": search_maxiter}}
+def config_record(
+    shape: str,
+    steps: int,
+    walkers: int,
+    init: str = "search",
+    moves: str = "stretch",
+    search_popsize: int = 15,
+    search_maxiter: int = 100,
+) -> dict:
+    return {
+        "name": "coverage",
+        "model": {"shape": shape, "n_sub": 1},
+        "parameters": {
+            "spin_period_s": {"kind": "uniform", "low": 9.76, "high": 9.96},
+            "precession_period_s": {"kind": "uniform", "low": 200.0, "high": 3000.0},
+            "jitter_mag": {"kind": "uniform", "low": 0.0, "high": 0.03},
+        },
+        "sampler": {
+            "n_walkers": walkers,
+            "n_steps": steps,
+            "init": init,
+            "moves": moves,
+            "search_popsize": search_popsize,
+            "search_maxiter": search_maxiter,
+        },
+    }
 
 
 def coverage_figure(recoveries, path: Path) -> None:
@@ -64,15 +82,17 @@ def coverage_figure(recoveries, path: Path) -> None:
         inside = np.array([r.covered[name] for r in recoveries])
         x = i + rng.uniform(-0.18, 0.18, quantile.size)
         axis.scatter(x[inside], quantile[inside], s=18, color="tab:blue", label="inside 16-84%" if i == 0 else None)
-        axis.scatter(x[~inside], quantile[~inside], s=18, color="tab:red", marker="x",
-                     label="outside" if i == 0 else None)
+        axis.scatter(
+            x[~inside], quantile[~inside], s=18, color="tab:red", marker="x", label="outside" if i == 0 else None
+        )
         axis.text(i, 1.04, f"{inside.mean():.0%}", ha="center", va="bottom", fontsize=9)
     axis.axhspan(0.16, 0.84, color="0.92", zorder=0)
     axis.set_xticks(range(len(names)), [n.replace("_", " ") for n in names], rotation=20, ha="right", fontsize=8)
     axis.set_ylim(-0.03, 1.12)
     axis.set_ylabel("truth's quantile in its posterior")
-    axis.set_title(f"Injection-recovery: {len(recoveries)} truths (calibrated: uniform on 0-1, "
-                   "68% in the grey band)", fontsize=9)
+    axis.set_title(
+        f"Injection-recovery: {len(recoveries)} truths (calibrated: uniform on 0-1, 68% in the grey band)", fontsize=9
+    )
     axis.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8)
     figure.tight_layout()
     figure.savefig(path)
@@ -97,17 +117,21 @@ def main(argv=None) -> int:
 
     from ingest import read_file
     from rsodb.fit.config import FitConfig
-    from rsodb.fit.injection import coverage_bounds, coverage_study, coverage_table, window
+    from rsodb.fit.coverage import coverage_bounds, coverage_study, coverage_table, window
 
     observed = read_file(TOPEX_PHV)[0]
     stride = max(1, round(150 / args.samples))
     template = window(observed, 0.0, 30.0, stride=stride)
-    config = FitConfig.from_dict(config_record(args.shape, args.steps, args.walkers, args.init, args.moves,
-                                                   args.search_popsize, args.search_maxiter))
+    config = FitConfig.from_dict(
+        config_record(
+            args.shape, args.steps, args.walkers, args.init, args.moves, args.search_popsize, args.search_maxiter
+        )
+    )
     started = time.perf_counter()
     with tempfile.TemporaryDirectory() as scratch:
-        recoveries = coverage_study(template, config, range(args.truths), noise_mag=0.02, chain_dir=scratch,
-                                    processes=args.processes)
+        recoveries = coverage_study(
+            template, config, range(args.truths), noise_mag=0.02, chain_dir=scratch, processes=args.processes
+        )
     elapsed = time.perf_counter() - started
     table = coverage_table(recoveries)
     if args.save:
@@ -124,19 +148,24 @@ def main(argv=None) -> int:
         verdict = "ok" if BAND[0] <= fraction <= BAND[1] else "OUTSIDE 50-85%"
         lines.append(f"| {name} | {fraction:.2f} | {verdict} |")
         print(f"{name:24s} coverage {fraction:.2f}  {verdict}")
-    print(f"pooled {pooled:.2f} over {args.truths * len(table)} intervals; converged chains {converged}/{args.truths}; "
-          f"{elapsed:.0f} s")
+    print(
+        f"pooled {pooled:.2f} over {args.truths * len(table)} intervals; converged chains {converged}/{args.truths}; "
+        f"{elapsed:.0f} s"
+    )
     for seed, r in enumerate(recoveries):
         missed = [n for n, c in r.covered.items() if not c]
-        print(f"truth {seed:2d}: {r.autocorr_lengths:.0f} autocorrelation times, "
-              f"{'converged' if r.converged else 'not converged'}, {r.elapsed_s:.0f} s; missed {missed or 'none'}")
+        print(
+            f"truth {seed:2d}: {r.autocorr_lengths:.0f} autocorrelation times, "
+            f"{'converged' if r.converged else 'not converged'}, {r.elapsed_s:.0f} s; missed {missed or 'none'}"
+        )
     if args.no_record:
         return 0
     coverage_figure(recoveries, FIGURE)
     print(f"wrote {FIGURE}")
     truth_rows = "\n".join(
         f"| {seed} | {r.autocorr_lengths:.0f} | " + " | ".join(f"{q:.2f}" for q in r.quantile.values()) + " |"
-        for seed, r in enumerate(recoveries))
+        for seed, r in enumerate(recoveries)
+    )
     load = os.getloadavg()
     section = f"""
 ## Fit coverage by injection-recovery ({dt.date.today().isoformat()}, bench/fit_coverage.py)

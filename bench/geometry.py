@@ -14,6 +14,7 @@ Measures, after the TLE is loaded and the ephemeris is warm (median of repeats):
 Run ``python bench/geometry.py`` (``--repeats N``, ``--no-record`` to skip appending the dated
 section to docs/benchmarks.md).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -27,11 +28,11 @@ import tracemalloc
 
 import numpy as np
 
-from raycast import ephemeris
-from raycast.attitude import InertialSpin, PrecessingSpin, TorqueFree
-from raycast.geometry import PassGeometry
-from raycast.orbit import Satellite
-from raycast.site import DERENIVKA
+from ingest.site import DERENIVKA
+from raycast.geometry import ephemeris
+from raycast.geometry.attitude import InertialSpin, PrecessingSpin, TorqueFree
+from raycast.geometry.orbit import Satellite
+from raycast.geometry.pass_geometry import PassGeometry
 
 ROOT = Path(__file__).resolve().parents[1]
 BENCHMARKS = ROOT / "docs" / "benchmarks.md"
@@ -94,7 +95,8 @@ def run(repeats: int) -> dict:
     results = {}
     results["geometry_ms"] = median_ms(lambda: PassGeometry.compute(satellite, DERENIVKA, times), repeats)
     results["geometry_k4_ms"] = median_ms(
-        lambda: PassGeometry.compute(satellite, DERENIVKA, times, exposure_s=0.2), repeats)
+        lambda: PassGeometry.compute(satellite, DERENIVKA, times, exposure_s=0.2), repeats
+    )
     results["skyfield_vectorised_ms"] = median_ms(lambda: skyfield_vectorised(satellite, times), max(3, repeats // 3))
 
     from skyfield.api import wgs84
@@ -119,18 +121,37 @@ def run(repeats: int) -> dict:
     results["peak_memory_mb"] = tracemalloc.get_traced_memory()[1] / 1e6
     tracemalloc.stop()
 
-    fit_pass = PassGeometry.compute(satellite, DERENIVKA, times[:150 * 2:2], exposure_s=0.2)
+    fit_pass = PassGeometry.compute(satellite, DERENIVKA, times[: 150 * 2 : 2], exposure_s=0.2)
     assert fit_pass.sun_gcrs.shape == (150, 4, 3)
     counter = iter(range(10**6))
     cached = TorqueFree.from_angular_momentum((1200.0, 2000.0, 2600.0), (0.3, 0.02, 0.4), 40.0, 30.0)
     cases = {
-        "PrecessingSpin": (lambda: fit_pass.body_frame(PrecessingSpin(
-            period_s=9.86, phase_deg=12.0, precession_period_s=689.0, precession_phase_deg=40.0,
-            precession_angle_deg=35.0)), 20 * repeats),
-        "InertialSpin": (lambda: fit_pass.body_frame(InertialSpin(
-            pole_ra_deg=40.0, pole_dec_deg=30.0, period_s=9.86, phase_deg=12.0)), 20 * repeats),
-        "TorqueFree (first use: integrates 300 s)": (lambda: fit_pass.body_frame(TorqueFree.from_angular_momentum(
-            (1200.0, 2000.0, 2600.0), (0.3, 0.02, 0.4 + 1e-9 * next(counter)), 40.0, 30.0)), max(3, repeats // 3)),
+        "PrecessingSpin": (
+            lambda: fit_pass.body_frame(
+                PrecessingSpin(
+                    period_s=9.86,
+                    phase_deg=12.0,
+                    precession_period_s=689.0,
+                    precession_phase_deg=40.0,
+                    precession_angle_deg=35.0,
+                )
+            ),
+            20 * repeats,
+        ),
+        "InertialSpin": (
+            lambda: fit_pass.body_frame(
+                InertialSpin(pole_ra_deg=40.0, pole_dec_deg=30.0, period_s=9.86, phase_deg=12.0)
+            ),
+            20 * repeats,
+        ),
+        "TorqueFree (first use: integrates 300 s)": (
+            lambda: fit_pass.body_frame(
+                TorqueFree.from_angular_momentum(
+                    (1200.0, 2000.0, 2600.0), (0.3, 0.02, 0.4 + 1e-9 * next(counter)), 40.0, 30.0
+                )
+            ),
+            max(3, repeats // 3),
+        ),
         "TorqueFree (cached)": (lambda: fit_pass.body_frame(cached), 20 * repeats),
     }
     results["body_frame_us"] = {
@@ -156,13 +177,22 @@ def report(results: dict) -> str:
         "",
         f"| {N_EPOCHS} epochs, TOPEX over Derenivka | median wall ms | median CPU ms | min wall ms | ratio (CPU) |",
         "|---|---|---|---|---|",
-        row("PassGeometry.compute, no exposure sub-samples", results["geometry_ms"],
-            f"target {TARGET_MS:.0f} ms wall: {'met' if results['geometry_ms'][0] <= TARGET_MS else 'MISSED'}"),
+        row(
+            "PassGeometry.compute, no exposure sub-samples",
+            results["geometry_ms"],
+            f"target {TARGET_MS:.0f} ms wall: {'met' if results['geometry_ms'][0] <= TARGET_MS else 'MISSED'}",
+        ),
         row("PassGeometry.compute, 0.2 s exposure, k = 4 (5 x 10^4 epochs)", results["geometry_k4_ms"], ""),
-        row("skyfield, vectorised Time arrays (GCRS, Alt/Az/range, apparent Sun)", results["skyfield_vectorised_ms"],
-            f"{results['skyfield_vectorised_ms'][1] / results['geometry_ms'][1]:.0f}x slower"),
-        row("skyfield, one call per epoch (200 timed, scaled)", results["skyfield_per_epoch_ms"],
-            f"{results['skyfield_per_epoch_ms'][1] / results['geometry_ms'][1]:.0f}x slower"),
+        row(
+            "skyfield, vectorised Time arrays (GCRS, Alt/Az/range, apparent Sun)",
+            results["skyfield_vectorised_ms"],
+            f"{results['skyfield_vectorised_ms'][1] / results['geometry_ms'][1]:.0f}x slower",
+        ),
+        row(
+            "skyfield, one call per epoch (200 timed, scaled)",
+            results["skyfield_per_epoch_ms"],
+            f"{results['skyfield_per_epoch_ms'][1] / results['geometry_ms'][1]:.0f}x slower",
+        ),
         "",
         f"Largest difference from skyfield at every epoch (interpolation of the slow frame terms): "
         f"position {error['position_mm']:.2g} mm, elevation {error['elevation_deg']:.2g} deg, "
@@ -172,14 +202,17 @@ def report(results: dict) -> str:
         "| body_frame, 150 times x 4 sub-samples, model built each call | median wall us | median CPU us | min wall us |",
         "|---|---|---|---|",
     ]
-    lines += [f"| {name} | {wall:.0f} | {cpu:.0f} | {least:.0f} |"
-              for name, (wall, cpu, least) in results["body_frame_us"].items()]
+    lines += [
+        f"| {name} | {wall:.0f} | {cpu:.0f} | {least:.0f} |"
+        for name, (wall, cpu, least) in results["body_frame_us"].items()
+    ]
     return "\n".join(lines) + "\n"
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                     epilog="example: python bench/geometry.py --repeats 21")
+    parser = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], epilog="example: python bench/geometry.py --repeats 21"
+    )
     parser.add_argument("--repeats", type=int, default=15, help="timed repeats per figure (median taken)")
     parser.add_argument("--no-record", action="store_true", help="print only; do not append to docs/benchmarks.md")
     args = parser.parse_args(argv)

@@ -3,7 +3,7 @@
     python bench/ingest.py                 # full size, 3 repeats, appends to docs/benchmarks.md
     python bench/ingest.py --files 200 --repeats 1 --no-record     # a quick look
 
-The corpus is synthesised once (`rsodb.archive.synthetic`, written by `ingest.writers` in the
+The corpus is synthesised once (`rsodb.samples.synthetic`, written by `ingest.writers` in the
 real layout) into a temporary directory. Each measurement runs in a fresh Python process, so its
 peak memory (``ru_maxrss`` of the process and, separately, of its reader processes) is its own
 and import time is excluded. Measured, in the same run:
@@ -16,12 +16,15 @@ and import time is excluded. Measured, in the same run:
 
 Target: at least 100 files/s on the project's 2-core machine.
 """
+
 from __future__ import annotations
 
 import argparse
+from concurrent.futures import ProcessPoolExecutor
 import datetime as dt
 import json
 import os
+from pathlib import Path
 import platform
 import resource
 import shutil
@@ -30,8 +33,6 @@ import subprocess
 import sys
 import tempfile
 import time
-from concurrent.futures import ProcessPoolExecutor
-from pathlib import Path
 
 # Running this file puts bench/ first on sys.path, where "ingest" would name this script rather
 # than the project's package.
@@ -45,7 +46,7 @@ SEED = 2026
 
 
 def _write_piece(args) -> int:
-    from rsodb.archive.synthetic import write_synthetic_corpus
+    from rsodb.samples.synthetic import write_synthetic_corpus
 
     directory, n_files, n_points, n_objects, indices = args
     return len(write_synthetic_corpus(directory, n_files, n_points, n_objects, seed=SEED, indices=indices))
@@ -55,8 +56,9 @@ def make_corpus(directory: Path, n_files: int, n_points: int, n_objects: int) ->
     """Write the corpus in parallel pieces (file k depends only on the seed and k)."""
     workers = os.cpu_count() or 1
     step = -(-n_files // (4 * workers))
-    pieces = [(directory, n_files, n_points, n_objects, range(i, min(i + step, n_files)))
-              for i in range(0, n_files, step)]
+    pieces = [
+        (directory, n_files, n_points, n_objects, range(i, min(i + step, n_files))) for i in range(0, n_files, step)
+    ]
     with ProcessPoolExecutor(workers) as pool:
         written = sum(pool.map(_write_piece, pieces))
     assert written == n_files
@@ -64,6 +66,7 @@ def make_corpus(directory: Path, n_files: int, n_points: int, n_objects: int) ->
 
 def _measure(mode: str, archive: str, corpus: str, workers: int | None) -> dict:
     """Runs in a child process: one timed operation, its wall time and peak memory."""
+
     def cpu_s() -> float:
         own, readers = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
         return own.ru_utime + own.ru_stime + readers.ru_utime + readers.ru_stime
@@ -88,7 +91,9 @@ def _measure(mode: str, archive: str, corpus: str, workers: int | None) -> dict:
         assert report.ok, report.summary()
         n = report.n_files
     return {
-        "files": n, "elapsed_s": elapsed, "cpu_s": cpu_s() - cpu_start,
+        "files": n,
+        "elapsed_s": elapsed,
+        "cpu_s": cpu_s() - cpu_start,
         "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
         "peak_rss_readers_mib": resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024,
     }
@@ -108,22 +113,34 @@ def run(n_files: int, n_points: int, n_objects: int, repeats: int) -> dict:
         started = time.perf_counter()
         make_corpus(corpus, n_files, n_points, n_objects)
         corpus_mib = sum(path.stat().st_size for path in corpus.iterdir()) / 2**20
-        print(f"corpus: {n_files} files, {corpus_mib:.0f} MiB, written in {time.perf_counter() - started:.0f} s",
-              flush=True)
+        print(
+            f"corpus: {n_files} files, {corpus_mib:.0f} MiB, written in {time.perf_counter() - started:.0f} s",
+            flush=True,
+        )
         archive_mib = 0.0
         for repeat in range(repeats):
             for mode, workers in (("ingest", None), ("ingest, workers=0", 0), ("parse only", None)):
                 archive = tmp / f"archive-{repeat}-{workers}"
                 result = measure("parse" if mode == "parse only" else "ingest", archive, corpus, workers)
                 results[mode].append(result)
-                print(f"  {mode:<18} {result['files'] / result['elapsed_s']:7.1f} files/s  "
-                      f"peak {result['peak_rss_mib']:.0f} MiB", flush=True)
+                print(
+                    f"  {mode:<18} {result['files'] / result['elapsed_s']:7.1f} files/s  "
+                    f"peak {result['peak_rss_mib']:.0f} MiB",
+                    flush=True,
+                )
                 if mode == "ingest":
                     archive_mib = sum(p.stat().st_size for p in (archive / "objects").glob("*.h5")) / 2**20
                     results["re-ingest"].append(measure("ingest", archive, corpus, None))
                 shutil.rmtree(archive, ignore_errors=True)
-    return {"results": results, "n_files": n_files, "n_points": n_points, "n_objects": n_objects,
-            "repeats": repeats, "corpus_mib": corpus_mib, "archive_mib": archive_mib}
+    return {
+        "results": results,
+        "n_files": n_files,
+        "n_points": n_points,
+        "n_objects": n_objects,
+        "repeats": repeats,
+        "corpus_mib": corpus_mib,
+        "archive_mib": archive_mib,
+    }
 
 
 def report(run_result: dict) -> str:
@@ -149,8 +166,10 @@ def report(run_result: dict) -> str:
     ]
     for mode in results:
         pooled = mode in ("ingest", "re-ingest")
-        lines.append(f"| {mode} | {rate[mode]:.1f} | {rate[mode] / rate['ingest']:.2f} | {cpu_ms[mode]:.1f} | "
-                     f"{memory[mode]:.0f} ({f'{readers[mode]:.0f}' if pooled else '-'}) |")
+        lines.append(
+            f"| {mode} | {rate[mode]:.1f} | {rate[mode] / rate['ingest']:.2f} | {cpu_ms[mode]:.1f} | "
+            f"{memory[mode]:.0f} ({f'{readers[mode]:.0f}' if pooled else '-'}) |"
+        )
     lines += [
         "",
         f"Target >= {TARGET_FILES_PER_S:.0f} files/s: ingest {verdict} it at {rate['ingest']:.1f} files/s. "

@@ -3,7 +3,7 @@
     python bench/period_recovery.py              # ~1000 seeded synthetic passes, 2 processes
     python bench/period_recovery.py --seeds 1    # a quicker, noisier chart
 
-Synthetic passes (`rsodb.injection`): 2500 points at a 0.2 s cadence (500 s), every shape
+Synthetic passes (`rsodb.periods.injection`): 2500 points at a 0.2 s cadence (500 s), every shape
 (sinusoid, two-faced, four-faced, glint), 1.5 to 200 cycles in the pass, amplitude 0.3 or
 1 mag, noise 0.05 or 0.2 mag, with and without 30% gaps and AR(1) red noise; periods get a
 random +-3% so that they are not commensurate with the cadence. A pass is *recovered* when
@@ -16,6 +16,7 @@ the noise, which no photometric method resolves) and other errors;
 median reported 1-sigma error; (c) recovery rate per observing condition; (d) the two-faced
 curve with nearly equal halves: recovery against the asymmetry.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -31,7 +32,7 @@ DURATION_S = 2500 * 0.2
 
 
 def injections(seeds: int):
-    from rsodb.injection import SHAPES, Injection
+    from rsodb.periods.injection import SHAPES, Injection
 
     rng = np.random.default_rng(11)
     conditions = [("white", 0.0, 0.0), ("30% gaps", 0.3, 0.0), ("red noise", 0.0, 0.7)]
@@ -43,11 +44,35 @@ def injections(seeds: int):
                     for name, gaps, rho in conditions:
                         for _ in range(seeds):
                             period = DURATION_S / cycles * rng.uniform(0.97, 1.03)
-                            out.append((name, Injection(shape, float(period), amplitude, noise, gap_fraction=gaps,
-                                                        red_noise_rho=rho, seed=int(rng.integers(2 ** 31)))))
-    asymmetric = [("asymmetry", Injection("two_faced", float(9.5 * rng.uniform(0.97, 1.03)), 1.0, 0.1,
-                                          asymmetry=float(a), seed=int(rng.integers(2 ** 31))))
-                  for a in (0.0, 0.01, 0.02, 0.03, 0.05, 0.08, 0.12) for _ in range(6 * seeds)]
+                            out.append(
+                                (
+                                    name,
+                                    Injection(
+                                        shape,
+                                        float(period),
+                                        amplitude,
+                                        noise,
+                                        gap_fraction=gaps,
+                                        red_noise_rho=rho,
+                                        seed=int(rng.integers(2**31)),
+                                    ),
+                                )
+                            )
+    asymmetric = [
+        (
+            "asymmetry",
+            Injection(
+                "two_faced",
+                float(9.5 * rng.uniform(0.97, 1.03)),
+                1.0,
+                0.1,
+                asymmetry=float(a),
+                seed=int(rng.integers(2**31)),
+            ),
+        )
+        for a in (0.0, 0.01, 0.02, 0.03, 0.05, 0.08, 0.12)
+        for _ in range(6 * seeds)
+    ]
     return out + asymmetric
 
 
@@ -63,7 +88,7 @@ def main(argv=None) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from rsodb.injection import SHAPES, recover
+    from rsodb.periods.injection import SHAPES, recover
 
     cases = injections(args.seeds)
     table = recover([inj for _, inj in cases], processes=args.processes, progress=True)
@@ -77,13 +102,22 @@ def main(argv=None) -> int:
         rate = grid[grid["shape"] == shape].groupby("cycles_bin").recovered.mean()
         ax.plot(rate.index, 100 * rate.values, "o-", color=f"C{i}", label=shape, ms=4)
     wrong = grid.assign(other=grid.confident_wrong & ~grid.confident_subharmonic).groupby("cycles_bin")
-    ax.plot(wrong.confident_subharmonic.mean().index, 100 * wrong.confident_subharmonic.mean().values, "k--",
-            label="confident at P/2..P/4 (parts alike\nwithin the noise; all shapes)")
+    ax.plot(
+        wrong.confident_subharmonic.mean().index,
+        100 * wrong.confident_subharmonic.mean().values,
+        "k--",
+        label="confident at P/2..P/4 (parts alike\nwithin the noise; all shapes)",
+    )
     ax.plot(wrong.other.mean().index, 100 * wrong.other.mean().values, "k:", label="confidently wrong otherwise")
     ax.axvline(3, color="0.5", lw=0.8, ls=":")
     ax.text(2.9, 62, "below 3 cycles:\n'too short'", fontsize="small", color="0.4", ha="right")
-    ax.set(xscale="log", xlabel="cycles in the pass", ylabel="% of passes", ylim=(-3, 103),
-           title="(a) recovered within the +-1% prior")
+    ax.set(
+        xscale="log",
+        xlabel="cycles in the pass",
+        ylabel="% of passes",
+        ylim=(-3, 103),
+        title="(a) recovered within the +-1% prior",
+    )
     ax.legend(fontsize="small", loc="lower right", bbox_to_anchor=(1.0, 0.1))
 
     ax = axes[0, 1]
@@ -91,35 +125,60 @@ def main(argv=None) -> int:
     error = ok.assign(abs_error=ok.relative_error.abs(), sigma=ok.uncertainty_s / ok.period_s)
     by_cycles = error.groupby("cycles_bin")
     ax.plot(by_cycles.abs_error.median().index, by_cycles.abs_error.median().values, "o-", label="median |dP/P|")
-    ax.plot(by_cycles.abs_error.quantile(0.9).index, by_cycles.abs_error.quantile(0.9).values, "s--",
-            label="90th percentile |dP/P|")
+    ax.plot(
+        by_cycles.abs_error.quantile(0.9).index,
+        by_cycles.abs_error.quantile(0.9).values,
+        "s--",
+        label="90th percentile |dP/P|",
+    )
     ax.plot(by_cycles.sigma.median().index, by_cycles.sigma.median().values, "k:", label="median reported sigma/P")
     ax.axhline(0.01, color="C3", lw=0.8)
     ax.text(1.6, 0.012, "+-1% prior", color="C3", fontsize="small")
-    ax.set(xscale="log", yscale="log", xlabel="cycles in the pass", ylabel="relative period error",
-           title="(b) period error of recovered passes")
+    ax.set(
+        xscale="log",
+        yscale="log",
+        xlabel="cycles in the pass",
+        ylabel="relative period error",
+        title="(b) period error of recovered passes",
+    )
     ax.legend(fontsize="small")
 
     ax = axes[1, 0]
     for i, (condition, part) in enumerate(grid.groupby("condition")):
         for j, (noise, sub) in enumerate(part.groupby("noise_mag")):
             rate = sub.groupby("cycles_bin").recovered.mean()
-            ax.plot(rate.index, 100 * rate.values, ["o-", "s--"][j], color=f"C{i}", ms=4,
-                    label=f"{condition}, noise {noise:g} mag")
-    ax.set(xscale="log", xlabel="cycles in the pass", ylabel="% recovered", ylim=(-3, 103),
-           title="(c) by observing condition (all shapes, both amplitudes)")
+            ax.plot(
+                rate.index,
+                100 * rate.values,
+                ["o-", "s--"][j],
+                color=f"C{i}",
+                ms=4,
+                label=f"{condition}, noise {noise:g} mag",
+            )
+    ax.set(
+        xscale="log",
+        xlabel="cycles in the pass",
+        ylabel="% recovered",
+        ylim=(-3, 103),
+        title="(c) by observing condition (all shapes, both amplitudes)",
+    )
     ax.legend(fontsize="small", loc="lower right")
 
     ax = axes[1, 1]
     two = table[table.condition == "asymmetry"]
-    half = (np.abs(two.found_period_s / (two.period_s / 2) - 1) < 0.01)
+    half = np.abs(two.found_period_s / (two.period_s / 2) - 1) < 0.01
     rows = two.assign(half=half).groupby("asymmetry")
     ax.plot(rows.recovered.mean().index, 100 * rows.recovered.mean().values, "o-", label="recovered (9.5 s)")
     ax.plot(rows.half.mean().index, 100 * rows.half.mean().values, "s--", label="reported the half period")
-    ax.plot(rows.confident_wrong.mean().index, 100 * rows.confident_wrong.mean().values, "k:",
-            label="confidently wrong")
-    ax.set(xlabel="difference between the halves (fraction of the amplitude)", ylabel="% of passes",
-           ylim=(-3, 103), title="(d) two-faced curve, 1 mag, noise 0.1 mag, 53 cycles")
+    ax.plot(
+        rows.confident_wrong.mean().index, 100 * rows.confident_wrong.mean().values, "k:", label="confidently wrong"
+    )
+    ax.set(
+        xlabel="difference between the halves (fraction of the amplitude)",
+        ylabel="% of passes",
+        ylim=(-3, 103),
+        title="(d) two-faced curve, 1 mag, noise 0.1 mag, 53 cycles",
+    )
     ax.legend(fontsize="small")
     fig.suptitle(f"Period search injection-recovery: {len(table)} synthetic passes of 2500 points", fontsize="medium")
     fig.tight_layout()
@@ -129,11 +188,15 @@ def main(argv=None) -> int:
 
     long_enough = grid[grid.n_cycles >= 3.5]
     other = long_enough.confident_wrong & ~long_enough.confident_subharmonic
-    print(f"{len(grid)} grid passes; with >= 3.5 cycles: recovered {100 * long_enough.recovered.mean():.1f}%, "
-          f"confidently wrong {100 * long_enough.confident_wrong.mean():.2f}% (at P/2..P/4: "
-          f"{100 * long_enough.confident_subharmonic.mean():.2f}%, otherwise {100 * other.mean():.2f}%)")
-    print("recovered by amplitude and noise:",
-          grid.groupby(["amplitude_mag", "noise_mag"]).recovered.mean().round(3).to_dict())
+    print(
+        f"{len(grid)} grid passes; with >= 3.5 cycles: recovered {100 * long_enough.recovered.mean():.1f}%, "
+        f"confidently wrong {100 * long_enough.confident_wrong.mean():.2f}% (at P/2..P/4: "
+        f"{100 * long_enough.confident_subharmonic.mean():.2f}%, otherwise {100 * other.mean():.2f}%)"
+    )
+    print(
+        "recovered by amplitude and noise:",
+        grid.groupby(["amplitude_mag", "noise_mag"]).recovered.mean().round(3).to_dict(),
+    )
     print(grid.groupby("shape").recovered.mean().round(3).to_string())
     print("by condition:", grid.groupby("condition").recovered.mean().round(3).to_dict())
     print("verdicts below 3 cycles:", grid[grid.n_cycles < 2.9].verdict.value_counts().to_dict())

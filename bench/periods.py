@@ -3,7 +3,7 @@
     python bench/periods.py                       # 1000 passes, appends to docs/benchmarks.md
     python bench/periods.py --passes 100 --no-record
 
-The passes are synthetic (`rsodb.injection`, seeded): mixed shapes (sinusoid, two-faced,
+The passes are synthetic (`rsodb.periods.injection`, seeded): mixed shapes (sinusoid, two-faced,
 four-faced, glint), periods log-uniform in 2-100 s (5 to 250 cycles in the 500 s pass), noise
 0.02-0.2 mag, amplitudes 0.3-1.5 mag, a fifth with 20% gaps, a fifth with AR(1) red noise.
 They are generated before the clock starts and sent to the workers as arrays. Measured in the
@@ -18,6 +18,7 @@ same run:
 
 CPU time does not depend on other jobs sharing the machine; wall time does.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -43,7 +44,7 @@ TARGET_S = 60.0
 
 
 def make_injections(n: int, seed: int = 2026):
-    from rsodb.injection import SHAPES, Injection
+    from rsodb.periods.injection import SHAPES, Injection
 
     rng = np.random.default_rng(seed)
     shapes = list(SHAPES)
@@ -51,19 +52,27 @@ def make_injections(n: int, seed: int = 2026):
     for i in range(n):
         kind = rng.random()
         gaps = 0.2 if kind < 0.2 else 0.0
-        out.append(Injection(
-            shape=shapes[i % len(shapes)], period_s=float(np.exp(rng.uniform(np.log(2), np.log(100)))),
-            amplitude_mag=float(rng.uniform(0.3, 1.5)), noise_mag=float(rng.uniform(0.02, 0.2)),
-            # Gapped passes start longer so that every pass keeps 2500 points.
-            n_points=int(round(2500 / (1 - gaps))), cadence_s=0.2, gap_fraction=gaps,
-            red_noise_rho=0.5 if 0.2 <= kind < 0.4 else 0.0, asymmetry=float(rng.uniform(0.2, 0.5)),
-            seed=int(seed * 1000 + i)))
+        out.append(
+            Injection(
+                shape=shapes[i % len(shapes)],
+                period_s=float(np.exp(rng.uniform(np.log(2), np.log(100)))),
+                amplitude_mag=float(rng.uniform(0.3, 1.5)),
+                noise_mag=float(rng.uniform(0.02, 0.2)),
+                # Gapped passes start longer so that every pass keeps 2500 points.
+                n_points=int(round(2500 / (1 - gaps))),
+                cadence_s=0.2,
+                gap_fraction=gaps,
+                red_noise_rho=0.5 if 0.2 <= kind < 0.4 else 0.0,
+                asymmetry=float(rng.uniform(0.2, 0.5)),
+                seed=int(seed * 1000 + i),
+            )
+        )
     return out
 
 
 def analyse(item):
     """Worker: (injection, light curve) -> (true period, found period, verdict)."""
-    from rsodb.periods import find_period
+    from rsodb.periods.search import find_period
 
     injection, lc = item
     result = find_period(lc)
@@ -73,12 +82,13 @@ def analyse(item):
 def peer_lombscargle(lc):
     from astropy.timeseries import LombScargle
 
-    from rsodb.periodogram import frequency_grid
+    from rsodb.periods.power import frequency_grid
 
     detrended = lc.detrend()
     grid = frequency_grid(detrended.t_s)
-    return LombScargle(detrended.t_s, detrended.mag, detrended.mag_err).power(grid, method="fast",
-                                                                                assume_regular_frequency=True)
+    return LombScargle(detrended.t_s, detrended.mag, detrended.mag_err).power(
+        grid, method="fast", assume_regular_frequency=True
+    )
 
 
 def main(argv=None) -> int:
@@ -90,8 +100,8 @@ def main(argv=None) -> int:
     parser.add_argument("--note", default="", help="a sentence appended to the recorded section")
     args = parser.parse_args(argv)
 
-    from rsodb.injection import RECOVERY_TOLERANCE, synthetic_lightcurve
-    from rsodb.periods import find_period
+    from rsodb.periods.injection import RECOVERY_TOLERANCE, synthetic_lightcurve
+    from rsodb.periods.search import find_period
     from rsodb.pool import default_processes, imap_in_pool
 
     processes = args.processes or default_processes()
@@ -114,7 +124,7 @@ def main(argv=None) -> int:
     confident_wrong = float(np.mean((verdicts == "confident") & ~(error < RECOVERY_TOLERANCE)))
 
     sample = items[: args.sample]
-    find_period(sample[0][1])                                       # warm imports and caches
+    find_period(sample[0][1])  # warm imports and caches
     per_pass, per_peer = [], []
     for _, lc in sample:
         # CPU time of this process: less sensitive than wall time to the other jobs on the machine.
@@ -127,7 +137,9 @@ def main(argv=None) -> int:
     median_ms, peer_ms = 1e3 * statistics.median(per_pass), 1e3 * statistics.median(per_peer)
     load = os.getloadavg()
 
-    verdict_counts = {v: int(np.sum(verdicts == v)) for v in ("confident", "ambiguous harmonic", "too short", "no signal")}
+    verdict_counts = {
+        v: int(np.sum(verdicts == v)) for v in ("confident", "ambiguous harmonic", "too short", "no signal")
+    }
     status = "met" if survey_s <= TARGET_S else "MISSED"
     lines = [
         f"survey: {len(items)} passes in {survey_s:.1f} s wall ({len(items) / survey_s:.1f} passes/s, "
@@ -141,13 +153,39 @@ def main(argv=None) -> int:
     ]
     print("\n".join(lines))
     if not args.no_record:
-        record(items, processes, survey_s, worker_cpu_s, median_ms, peer_ms, recovered, confident_wrong,
-               verdict_counts, load, status, len(sample), args.note)
+        record(
+            items,
+            processes,
+            survey_s,
+            worker_cpu_s,
+            median_ms,
+            peer_ms,
+            recovered,
+            confident_wrong,
+            verdict_counts,
+            load,
+            status,
+            len(sample),
+            args.note,
+        )
     return 0
 
 
-def record(items, processes, survey_s, worker_cpu_s, median_ms, peer_ms, recovered, confident_wrong,
-           verdict_counts, load, status, n_sample, note: str = "") -> None:
+def record(
+    items,
+    processes,
+    survey_s,
+    worker_cpu_s,
+    median_ms,
+    peer_ms,
+    recovered,
+    confident_wrong,
+    verdict_counts,
+    load,
+    status,
+    n_sample,
+    note: str = "",
+) -> None:
     n = len(items)
     text = (
         f"\n## Period search (bench/periods.py, {dt.date.today().isoformat()})\n\n"
@@ -164,7 +202,9 @@ def record(items, processes, survey_s, worker_cpu_s, median_ms, peer_ms, recover
         f"| one process, CPU, median of {n_sample}: find_period | {median_ms:.1f} ms | {median_ms / peer_ms:.1f}x |\n"
         f"| one process, CPU, median of {n_sample}: astropy LombScargle alone (peer) | {peer_ms:.1f} ms | 1.0x |\n\n"
         f"Recovered within the +-1% prior: {100 * recovered:.1f}%; confidently wrong: {100 * confident_wrong:.1f}%; "
-        f"verdicts: " + ", ".join(f"{v} {c}" for v, c in verdict_counts.items()) + ".\n"
+        f"verdicts: "
+        + ", ".join(f"{v} {c}" for v, c in verdict_counts.items())
+        + ".\n"
         + (f"\n{note}\n" if note else "")
     )
     with open(BENCHMARKS, "a", encoding="utf-8") as stream:

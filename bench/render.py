@@ -21,6 +21,7 @@ jobs; CPU times of this process are printed beside them.
 Run: ``python bench/render.py`` (add ``--no-cycles`` to skip Blender, ``--quick`` for a smoke run,
 ``--chart-only`` to redraw the chart from the last recorded run).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -36,12 +37,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from raycast.attitude import PrecessingSpin  # noqa: E402
-from raycast.brdf import GGX, Lambertian, Principled  # noqa: E402
-from raycast.cache import SceneCache  # noqa: E402
-from raycast.direct import DirectRenderer  # noqa: E402
+from raycast.geometry.attitude import PrecessingSpin  # noqa: E402
 from raycast.models import topex  # noqa: E402
-from raycast.scene import Scene  # noqa: E402
+from raycast.renderer.brdf import GGX, Lambertian, Principled  # noqa: E402
+from raycast.renderer.cache import SceneCache  # noqa: E402
+from raycast.renderer.direct import DirectRenderer  # noqa: E402
+from raycast.renderer.scene import Scene  # noqa: E402
 
 SHARED = (ROOT / ".." / "shared" / "data").resolve()
 TOPEX_PHV = SHARED / "observations" / "result_22076_20240730_UT212240.phV"
@@ -58,20 +59,22 @@ ATTITUDES = {
 def scenes():
     return {
         "TOPEX": topex.build(),
-        "COSMOS 2502": Scene.from_file(MODELS / "cosmos2502_lotos.obj",
-                                       materials=MODELS / "cosmos2502_lotos.materials.json"),
+        "COSMOS 2502": Scene.from_file(
+            MODELS / "cosmos2502_lotos.obj", materials=MODELS / "cosmos2502_lotos.materials.json"
+        ),
     }
 
 
 def pass_directions(attitude, rows):
     """Body-frame (Sun, observer) unit vectors (n, 3) of the real TOPEX pass at ``rows``."""
     import ingest
-    from raycast.geometry import PassGeometry
-    from raycast.orbit import Satellite
+    from raycast.geometry.orbit import Satellite
+    from raycast.geometry.pass_geometry import PassGeometry
 
     observed = ingest.read_file(TOPEX_PHV)[0]
-    geometry = PassGeometry.compute(Satellite.from_tle(observed.tle), observed.site, observed.time_utc[rows],
-                                    exposure_s=0.0)
+    geometry = PassGeometry.compute(
+        Satellite.from_tle(observed.tle), observed.site, observed.time_utc[rows], exposure_s=0.0
+    )
     body = geometry.body_frame(attitude)
     return body.sun_body[:, 0], body.obs_body[:, 0]
 
@@ -100,7 +103,7 @@ def timed(function, repeats=1):
 
 def cycles_mesh(scene):
     """The scene as a raycast.cycles.CyclesMesh with the same BRDF parameters."""
-    from raycast.cycles import CyclesMesh
+    from raycast.cycles.runner import CyclesMesh
 
     records = []
     for brdf in scene.brdfs:
@@ -109,66 +112,128 @@ def cycles_mesh(scene):
         elif isinstance(brdf, GGX):
             records.append({"blender_node": "Glossy BSDF", "color": [brdf.color] * 3, "roughness": brdf.roughness})
         elif isinstance(brdf, Principled):
-            records.append({"blender_node": "Principled BSDF", "base_color": [brdf.base_color] * 3,
-                            "metallic": brdf.metallic, "roughness": brdf.roughness,
-                            "specular_ior_level": brdf.specular_ior_level, "ior": brdf.ior})
+            records.append(
+                {
+                    "blender_node": "Principled BSDF",
+                    "base_color": [brdf.base_color] * 3,
+                    "metallic": brdf.metallic,
+                    "roughness": brdf.roughness,
+                    "specular_ior_level": brdf.specular_ior_level,
+                    "ior": brdf.ior,
+                }
+            )
         else:
             raise TypeError(f"no Cycles node for {brdf!r}")
     mesh = scene.posed()
     vertices = mesh.vertices_m
     triangles = np.arange(len(vertices)).reshape(-1, 3)
-    return CyclesMesh.from_arrays(vertices, triangles, records, material_index=mesh.material_index,
-                                  corner_normals=mesh.corner_normals, material_names=scene.material_names)
+    return CyclesMesh.from_arrays(
+        vertices,
+        triangles,
+        records,
+        material_index=mesh.material_index,
+        corner_normals=mesh.corner_normals,
+        material_names=scene.material_names,
+    )
 
 
-def bench_model(name, scene, rows, pixels, grid_pixels, raster_pixels, grids, cycles_samples, cycles_frames,
-                reference_pixel):
+def bench_model(
+    name, scene, rows, pixels, grid_pixels, raster_pixels, grids, cycles_samples, cycles_frames, reference_pixel
+):
     """All measurements of one model on one stretch of the pass; returns result rows and the
     reference's convergence (RMS mag between it and twice its pixel size)."""
     sun, obs = pass_directions(ATTITUDES[name], rows)
     n = len(sun)
     print(f"\n{name}: {n} frames, reference pixel {reference_pixel} m", flush=True)
-    reference, ref_wall, _ = timed(lambda: DirectRenderer(scene, reference_pixel, accuracy_mag=0.001,
-                                                                  sampling="adaptive").intensity(sun, obs))
+    reference, ref_wall, _ = timed(
+        lambda: DirectRenderer(scene, reference_pixel, accuracy_mag=0.001, sampling="adaptive").intensity(sun, obs)
+    )
     check = DirectRenderer(scene, 2 * reference_pixel, accuracy_mag=0.001, sampling="adaptive").intensity(sun, obs)
     converged = rms_mag(check, reference)
     print(f"  reference rendered in {ref_wall:.1f} s; twice its pixel differs by {converged:.5f} mag", flush=True)
     results, caches = [], {}
-    for method, sampling, sizes in (("direct", "adaptive", pixels), ("direct-grid", "grid", grid_pixels),
-                                    ("direct-raster", "raster", raster_pixels)):
+    for method, sampling, sizes in (
+        ("direct", "adaptive", pixels),
+        ("direct-grid", "grid", grid_pixels),
+        ("direct-raster", "raster", raster_pixels),
+    ):
         for pixel in sizes:
-            values, wall, cpu = timed(lambda: DirectRenderer(scene, pixel, sampling=sampling).intensity(sun, obs),
-                                      repeats=3)
-            results.append(dict(model=name, frames=n, method=method, setting=f"pixel {pixel} m", wall_s=wall,
-                                cpu_s=cpu, setup_s=0.0, error_mag=rms_mag(values, reference), memory_mb=0.0))
-            print(f"  {method} {pixel} m: {wall:.2f} s wall, {cpu:.2f} s CPU, {results[-1]['error_mag']:.4f} mag",
-                  flush=True)
+            values, wall, cpu = timed(
+                lambda: DirectRenderer(scene, pixel, sampling=sampling).intensity(sun, obs), repeats=3
+            )
+            results.append(
+                dict(
+                    model=name,
+                    frames=n,
+                    method=method,
+                    setting=f"pixel {pixel} m",
+                    wall_s=wall,
+                    cpu_s=cpu,
+                    setup_s=0.0,
+                    error_mag=rms_mag(values, reference),
+                    memory_mb=0.0,
+                )
+            )
+            print(
+                f"  {method} {pixel} m: {wall:.2f} s wall, {cpu:.2f} s CPU, {results[-1]['error_mag']:.4f} mag",
+                flush=True,
+            )
     for grid, edge, element in grids:
-        cache, build_wall, _ = timed(lambda: SceneCache.build(scene, grid_size=grid, edge_rays_per_side=edge,
-                                                              element_size_m=element))
+        cache, build_wall, _ = timed(
+            lambda: SceneCache.build(scene, grid_size=grid, edge_rays_per_side=edge, element_size_m=element)
+        )
         if edge == 1 and element is None:
             caches[grid] = cache
-        setting = (f"grid {grid}" + (f"+{edge}x{edge}-edge-rays" if edge > 1 else "")
-                   + (f"+elements-{element}-m" if element else ""))
+        setting = (
+            f"grid {grid}"
+            + (f"+{edge}x{edge}-edge-rays" if edge > 1 else "")
+            + (f"+elements-{element}-m" if element else "")
+        )
         values, wall, cpu = timed(lambda: cache.intensity(sun, obs), repeats=5)
-        results.append(dict(model=name, frames=n, method="cached", setting=setting, wall_s=wall, cpu_s=cpu,
-                            setup_s=build_wall, error_mag=rms_mag(values, reference), memory_mb=cache.nbytes / 1e6))
-        print(f"  cached {setting}: build {build_wall:.1f} s, {1e3 * wall:.1f} ms wall, {1e3 * cpu:.1f} ms CPU, "
-              f"{results[-1]['error_mag']:.4f} mag, {cache.nbytes / 1e6:.0f} MB", flush=True)
+        results.append(
+            dict(
+                model=name,
+                frames=n,
+                method="cached",
+                setting=setting,
+                wall_s=wall,
+                cpu_s=cpu,
+                setup_s=build_wall,
+                error_mag=rms_mag(values, reference),
+                memory_mb=cache.nbytes / 1e6,
+            )
+        )
+        print(
+            f"  cached {setting}: build {build_wall:.1f} s, {1e3 * wall:.1f} ms wall, {1e3 * cpu:.1f} ms CPU, "
+            f"{results[-1]['error_mag']:.4f} mag, {cache.nbytes / 1e6:.0f} MB",
+            flush=True,
+        )
     if cycles_samples:
-        from raycast.cycles import CyclesSettings, render_cycles
+        from raycast.cycles.runner import CyclesSettings, render_cycles
 
         subset = np.linspace(0, n - 1, cycles_frames).astype(int)
         mesh = cycles_mesh(scene)
         for samples in cycles_samples:
             result = render_cycles(mesh, sun[subset], obs[subset], CyclesSettings(samples=samples), progress=False)
             per_frame = result.seconds_per_frame
-            results.append(dict(model=name, frames=n, method="cycles", setting=f"{samples} samples",
-                                wall_s=per_frame * n, cpu_s=result.cpu_seconds_per_frame * n,
-                                setup_s=result.seconds_setup,
-                                error_mag=rms_mag(result.intensity_m2_sr, reference[subset]), memory_mb=0.0))
-            print(f"  cycles {samples} samples: {per_frame:.2f} s/frame -> {per_frame * n:.0f} s per light curve, "
-                  f"{results[-1]['error_mag']:.4f} mag on {cycles_frames} frames", flush=True)
+            results.append(
+                dict(
+                    model=name,
+                    frames=n,
+                    method="cycles",
+                    setting=f"{samples} samples",
+                    wall_s=per_frame * n,
+                    cpu_s=result.cpu_seconds_per_frame * n,
+                    setup_s=result.seconds_setup,
+                    error_mag=rms_mag(result.intensity_m2_sr, reference[subset]),
+                    memory_mb=0.0,
+                )
+            )
+            print(
+                f"  cycles {samples} samples: {per_frame:.2f} s/frame -> {per_frame * n:.0f} s per light curve, "
+                f"{results[-1]['error_mag']:.4f} mag on {cycles_frames} frames",
+                flush=True,
+            )
     return results, caches, converged
 
 
@@ -180,23 +245,33 @@ def chart(results, path):
 
     models = sorted({r["model"] for r in results if r["frames"] == 150})
     fig, axes = plt.subplots(1, len(models), figsize=(6 * len(models), 5.4), squeeze=False)
-    styles = {"direct": ("o-", "C0", "direct ray casting, adaptive (pixel sizes)"),
-              "direct-grid": ("o:", "C7", "direct ray casting, regular grid (pixel sizes)"),
-              "direct-raster": ("D-", "C1", "direct, regular grid scan-converted + shadow rays (pixel sizes)"),
-              "cached": ("s-", "C2", "cached fast path (grid sizes)"),
-              "cycles": ("^-", "C3", "Blender Cycles CPU (samples)")}
+    styles = {
+        "direct": ("o-", "C0", "direct ray casting, adaptive (pixel sizes)"),
+        "direct-grid": ("o:", "C7", "direct ray casting, regular grid (pixel sizes)"),
+        "direct-raster": ("D-", "C1", "direct, regular grid scan-converted + shadow rays (pixel sizes)"),
+        "cached": ("s-", "C2", "cached fast path (grid sizes)"),
+        "cycles": ("^-", "C3", "Blender Cycles CPU (samples)"),
+    }
     for ax, model in zip(axes[0], models):
         for method, (marker, color, label) in styles.items():
-            rows = sorted((r for r in results if r["model"] == model and r["method"] == method and r["frames"] == 150),
-                          key=lambda r: r["cpu_s"])
+            rows = sorted(
+                (r for r in results if r["model"] == model and r["method"] == method and r["frames"] == 150),
+                key=lambda r: r["cpu_s"],
+            )
             if not rows:
                 continue
-            ax.loglog([r["cpu_s"] for r in rows], [max(r["error_mag"], 1e-4) for r in rows], marker, color=color,
-                      label=label)
+            ax.loglog(
+                [r["cpu_s"] for r in rows], [max(r["error_mag"], 1e-4) for r in rows], marker, color=color, label=label
+            )
             for r in rows:
-                ax.annotate(r["setting"].split(" ")[1] if method != "cycles" else r["setting"].split(" ")[0],
-                            (r["cpu_s"], max(r["error_mag"], 1e-4)), textcoords="offset points", xytext=(4, 4),
-                            fontsize=7, color=color)
+                ax.annotate(
+                    r["setting"].split(" ")[1] if method != "cycles" else r["setting"].split(" ")[0],
+                    (r["cpu_s"], max(r["error_mag"], 1e-4)),
+                    textcoords="offset points",
+                    xytext=(4, 4),
+                    fontsize=7,
+                    color=color,
+                )
         ax.axvline(0.02, color="C2", lw=0.8, ls=":")
         ax.axhline(0.01, color="C2", lw=0.8, ls=":", label="fast-path target (20 ms, 0.01 mag)")
         ax.axvline(1.0, color="C0", lw=0.8, ls="--")
@@ -253,18 +328,24 @@ def verdict(rows, method, target_mag, target_s):
     met = [r for r in mine if r["error_mag"] <= target_mag]
     if not met:
         best = min(mine, key=lambda r: r["error_mag"])
-        return (f"{method} MISSES {target_mag} mag at every setting (best {best['error_mag']:.4f} mag at "
-                f"{best['cpu_s']:.3f} s CPU)")
+        return (
+            f"{method} MISSES {target_mag} mag at every setting (best {best['error_mag']:.4f} mag at "
+            f"{best['cpu_s']:.3f} s CPU)"
+        )
     best = min(met, key=lambda r: r["cpu_s"])
-    text = (f"{best['method']} {best['setting']}: {best['error_mag']:.4f} mag in {1e3 * best['cpu_s']:.1f} ms CPU "
-            f"({1e3 * best['wall_s']:.1f} ms wall; {'meets' if best['cpu_s'] <= target_s else 'MISSES'} "
-            f"{target_s:g} s at {target_mag} mag)")
+    text = (
+        f"{best['method']} {best['setting']}: {best['error_mag']:.4f} mag in {1e3 * best['cpu_s']:.1f} ms CPU "
+        f"({1e3 * best['wall_s']:.1f} ms wall; {'meets' if best['cpu_s'] <= target_s else 'MISSES'} "
+        f"{target_s:g} s at {target_mag} mag)"
+    )
     if cycles:
         cycles_s, how = time_at_error(cycles, best["error_mag"])
         ratio = cycles_s / best["cpu_s"]
         if how is None:
-            text += (f", Cycles never reached {best['error_mag']:.4f} mag (best "
-                     f"{min(r['error_mag'] for r in cycles):.4f}): > {ratio:.0f}x")
+            text += (
+                f", Cycles never reached {best['error_mag']:.4f} mag (best "
+                f"{min(r['error_mag'] for r in cycles):.4f}): > {ratio:.0f}x"
+            )
         else:
             text += f", Cycles at equal accuracy ({how}) {cycles_s:.1f} s CPU: {ratio:.0f}x"
             text += " (meets 100x)" if ratio >= 100 else " (MISSES 100x)"
@@ -272,31 +353,37 @@ def verdict(rows, method, target_mag, target_s):
 
 
 def table(results, load, peak_mb, convergence):
-    lines = [f"\n## Renderer speed vs accuracy ({datetime.date.today().isoformat()}, bench/render.py)\n",
-             f"Real TOPEX pass 2024-07-30 (Derenivka), paper attitudes; one direction pair per frame. "
-             f"Shared 2-core machine, load average {load:.1f} at the start: wall times are inflated by other "
-             f"jobs, CPU times are this process's. Errors are RMS magnitudes against a converged reference (the "
-             f"adaptive direct renderer at 4 mm, smooth tolerance 0.001 mag; at 8 mm it differs by "
-             + ", ".join(f"{v:.5f} mag on {k}" for k, v in convergence.items()) +
-             f"), over frames brighter than {DARK_FRACTION:g} of the peak; \"direct\" is the adaptive sampling, "
-             f"\"direct-grid\" the regular grid, \"direct-raster\" the same grid with its first hits found by scan "
-             f"conversion (shadow rays only where another part can shade); Cycles times are per "
-             f"frame on a subset times the frame count (CPU summed over Blender's threads). Speed ratios are "
-             f"taken at equal accuracy on CPU time: Cycles' time to reach each method's error, interpolated "
-             f"log-log on its curve (extrapolated as error**-2 beyond its least accurate setting). "
-             f"Peak RSS {peak_mb:.0f} MB.\n",
-             "| model | frames | method | setting | wall per LC | CPU per LC | one-off setup | RMS error (mag) | memory |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        f"\n## Renderer speed vs accuracy ({datetime.date.today().isoformat()}, bench/render.py)\n",
+        f"Real TOPEX pass 2024-07-30 (Derenivka), paper attitudes; one direction pair per frame. "
+        f"Shared 2-core machine, load average {load:.1f} at the start: wall times are inflated by other "
+        f"jobs, CPU times are this process's. Errors are RMS magnitudes against a converged reference (the "
+        f"adaptive direct renderer at 4 mm, smooth tolerance 0.001 mag; at 8 mm it differs by "
+        + ", ".join(f"{v:.5f} mag on {k}" for k, v in convergence.items())
+        + f'), over frames brighter than {DARK_FRACTION:g} of the peak; "direct" is the adaptive sampling, '
+        f'"direct-grid" the regular grid, "direct-raster" the same grid with its first hits found by scan '
+        f"conversion (shadow rays only where another part can shade); Cycles times are per "
+        f"frame on a subset times the frame count (CPU summed over Blender's threads). Speed ratios are "
+        f"taken at equal accuracy on CPU time: Cycles' time to reach each method's error, interpolated "
+        f"log-log on its curve (extrapolated as error**-2 beyond its least accurate setting). "
+        f"Peak RSS {peak_mb:.0f} MB.\n",
+        "| model | frames | method | setting | wall per LC | CPU per LC | one-off setup | RMS error (mag) | memory |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
     for r in results:
         cpu = "-" if not np.isfinite(r["cpu_s"]) else f"{r['cpu_s']:.4f} s"
         memory = f"{r['memory_mb']:.0f} MB" if r["memory_mb"] else "-"
-        lines.append(f"| {r['model']} | {r['frames']} | {r['method']} | {r['setting']} | {r['wall_s']:.4f} s | {cpu} "
-                     f"| {r['setup_s']:.1f} s | {r['error_mag']:.4f} | {memory} |")
+        lines.append(
+            f"| {r['model']} | {r['frames']} | {r['method']} | {r['setting']} | {r['wall_s']:.4f} s | {cpu} "
+            f"| {r['setup_s']:.1f} s | {r['error_mag']:.4f} | {memory} |"
+        )
     verdicts = []
     for model in sorted({r["model"] for r in results}):
         rows = [r for r in results if r["model"] == model and r["frames"] == 150]
-        verdicts.append(f"- {model}: " + "; ".join(verdict(rows, method, target_mag, target_s)
-                                                   for method, target_mag, target_s in TARGETS))
+        verdicts.append(
+            f"- {model}: "
+            + "; ".join(verdict(rows, method, target_mag, target_s) for method, target_mag, target_s in TARGETS)
+        )
     lines += ["", *verdicts, ""]
     with TABLE.open("a") as handle:
         handle.write("\n".join(lines) + "\n")
@@ -315,9 +402,19 @@ def results_from_table(path=TABLE):
         if len(cells) != 9 or not cells[1].isdigit():
             continue
         number = lambda cell: float(cell.split()[0]) if cell != "-" else float("nan")  # noqa: E731 ("0.5 s", "45 MB")
-        results.append(dict(model=cells[0], frames=int(cells[1]), method=cells[2], setting=cells[3],
-                            wall_s=number(cells[4]), cpu_s=number(cells[5]), setup_s=number(cells[6]),
-                            error_mag=float(cells[7]), memory_mb=0.0 if cells[8] == "-" else number(cells[8])))
+        results.append(
+            dict(
+                model=cells[0],
+                frames=int(cells[1]),
+                method=cells[2],
+                setting=cells[3],
+                wall_s=number(cells[4]),
+                cpu_s=number(cells[5]),
+                setup_s=number(cells[6]),
+                error_mag=float(cells[7]),
+                memory_mb=0.0 if cells[8] == "-" else number(cells[8]),
+            )
+        )
     return results
 
 
@@ -325,8 +422,11 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--no-cycles", action="store_true", help="skip Blender Cycles")
     parser.add_argument("--quick", action="store_true", help="fewer settings (smoke run); writes nothing")
-    parser.add_argument("--chart-only", action="store_true",
-                        help="redraw the chart from the last run recorded in docs/benchmarks.md; renders nothing")
+    parser.add_argument(
+        "--chart-only",
+        action="store_true",
+        help="redraw the chart from the last run recorded in docs/benchmarks.md; renders nothing",
+    )
     args = parser.parse_args(argv)
     if args.chart_only:
         chart(results_from_table(), CHART)
@@ -338,13 +438,19 @@ def main(argv=None):
     results, convergence = [], {}
     for name, scene in scenes().items():
         rows, caches, converged = bench_model(
-            name, scene, short, pixels=(0.1,) if quick else (0.12, 0.06, 0.03, 0.015),
+            name,
+            scene,
+            short,
+            pixels=(0.1,) if quick else (0.12, 0.06, 0.03, 0.015),
             grid_pixels=(0.1,) if quick else (0.06, 0.045, 0.03),
             raster_pixels=(0.1,) if quick else (0.06, 0.045, 0.03, 0.02),
-            grids=((16, 1, None),) if quick else ((16, 1, None), (32, 1, None), (48, 1, None), (32, 2, None),
-                                                   (32, 1, 0.15)),
+            grids=((16, 1, None),)
+            if quick
+            else ((16, 1, None), (32, 1, None), (48, 1, None), (32, 2, None), (32, 1, 0.15)),
             cycles_samples=() if args.no_cycles else ((4,) if quick else (4, 16, 64)),
-            cycles_frames=3 if quick else 8, reference_pixel=0.05 if quick else 0.004)
+            cycles_frames=3 if quick else 8,
+            reference_pixel=0.05 if quick else 0.004,
+        )
         results += rows
         convergence[name] = converged
         if not quick:
@@ -352,21 +458,45 @@ def main(argv=None):
             # reference resolution would take most of the run); times are for all 2320 frames.
             subset = long[::10]
             sun, obs = pass_directions(ATTITUDES[name], long)
-            reference = DirectRenderer(scene, 0.004, accuracy_mag=0.001, sampling="adaptive").intensity(sun[subset],
-                                                                                                   obs[subset])
+            reference = DirectRenderer(scene, 0.004, accuracy_mag=0.001, sampling="adaptive").intensity(
+                sun[subset], obs[subset]
+            )
             cache = caches[32]
             build = cache.precompute_s
             values, wall, cpu = timed(lambda: cache.intensity(sun, obs), repeats=3)
-            results.append(dict(model=name, frames=len(long), method="cached", setting="grid 32", wall_s=wall,
-                                cpu_s=cpu, setup_s=build, error_mag=rms_mag(values[subset], reference),
-                                memory_mb=cache.nbytes / 1e6))
+            results.append(
+                dict(
+                    model=name,
+                    frames=len(long),
+                    method="cached",
+                    setting="grid 32",
+                    wall_s=wall,
+                    cpu_s=cpu,
+                    setup_s=build,
+                    error_mag=rms_mag(values[subset], reference),
+                    memory_mb=cache.nbytes / 1e6,
+                )
+            )
             for method, sampling in (("direct", "adaptive"), ("direct-raster", "raster")):
                 values, wall, cpu = timed(lambda: DirectRenderer(scene, 0.03, sampling=sampling).intensity(sun, obs))
-                results.append(dict(model=name, frames=len(long), method=method, setting="pixel 0.03 m",
-                                    wall_s=wall, cpu_s=cpu, setup_s=0.0, error_mag=rms_mag(values[subset], reference),
-                                    memory_mb=0.0))
-            print(f"  long pass: cached {results[-3]['wall_s']:.2f} s / direct {results[-2]['wall_s']:.1f} s / "
-                  f"direct-raster {results[-1]['wall_s']:.1f} s", flush=True)
+                results.append(
+                    dict(
+                        model=name,
+                        frames=len(long),
+                        method=method,
+                        setting="pixel 0.03 m",
+                        wall_s=wall,
+                        cpu_s=cpu,
+                        setup_s=0.0,
+                        error_mag=rms_mag(values[subset], reference),
+                        memory_mb=0.0,
+                    )
+                )
+            print(
+                f"  long pass: cached {results[-3]['wall_s']:.2f} s / direct {results[-2]['wall_s']:.1f} s / "
+                f"direct-raster {results[-1]['wall_s']:.1f} s",
+                flush=True,
+            )
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     if quick:
         for r in results:

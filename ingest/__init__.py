@@ -1,10 +1,23 @@
 """Readers for observation files and their photometric reduction (no HDF5 here).
 
+The front door: everything a notebook needs, loaded on first use.
+
 >>> import ingest
 >>> passes = ingest.read_file("result_22076_20240730_UT212240.phV")   # doctest: +SKIP
+>>> passes[0].to_pandas()                                             # doctest: +SKIP
 """
-from ingest.errors import FormatError
-from ingest.observation import Pass, Reduction
-from ingest.readers import READERS, detect_format, read_file
 
-__all__ = ["Pass", "Reduction", "FormatError", "READERS", "detect_format", "read_file"]
+import lazy_loader
+
+__getattr__, __dir__, __all__ = lazy_loader.attach(
+    __name__,
+    submod_attrs={
+        "errors": ["FormatError"],
+        "observation": ["Pass", "ARRAY_FIELDS"],
+        "reduction": ["Reduction", "fit_reduction", "standard_mag"],
+        "readers": ["READERS", "detect_format", "read_file", "read_pass"],
+        "site": ["Site", "DERENIVKA", "UZHHOROD"],
+        "elements": ["parse_tle", "parse_omm"],
+        "writers": ["write_ccd_phot", "write_phc"],
+    },
+)

@@ -25,6 +25,7 @@ or the JD variant whose rows start with one Julian-date column (13 columns). The
 column is in km whatever its label says; a ``*`` after the frame's file name marks a
 saturated frame.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
@@ -36,12 +37,19 @@ import numpy as np
 from ingest import elements
 from ingest.observation import Pass
 from ingest.reduction import fit_note, fit_reduction, sign_corrected_mag
+from ingest.site import DERENIVKA, Site
 from ingest.table import (
-    ELEVATION, POSITIVE_RANGE, Column, Rows, check_increasing, check_parsed, check_rows, read_rows,
+    ELEVATION,
+    POSITIVE_RANGE,
+    Column,
+    Rows,
+    check_increasing,
+    check_parsed,
+    check_rows,
+    read_rows,
 )
 from ingest.textfile import TextFile
 from ingest.times import NS_PER_DAY, NS_PER_S, date_days, julian_date_ns, time_of_day_ns, to_datetime64
-from raycast.site import DERENIVKA, Site
 
 __all__ = ["CcdPhotReader", "stamp_offset_s", "MID_EXPOSURE_SINCE", "UT_COLUMNS", "JD_COLUMNS"]
 
@@ -50,9 +58,17 @@ __all__ = ["CcdPhotReader", "stamp_offset_s", "MID_EXPOSURE_SINCE", "UT_COLUMNS"
 MID_EXPOSURE_SINCE = np.datetime64("2023-02-01T00:00:00", "ns")
 
 _COMMON = (
-    Column("x_px", "X"), Column("y_px", "Y"), Column("x_err_px", "Xerr"), Column("y_err_px", "Yerr"),
-    Column("flux", "Flux"), Column("flux_err", "Flux_err"), Column("mag", "mag"), Column("mag_err", "mag_err"),
-    Column("az_deg", "Az(deg)"), Column("el_deg", "El(deg)"), Column("range_km", "Rg"),
+    Column("x_px", "X"),
+    Column("y_px", "Y"),
+    Column("x_err_px", "Xerr"),
+    Column("y_err_px", "Yerr"),
+    Column("flux", "Flux"),
+    Column("flux_err", "Flux_err"),
+    Column("mag", "mag"),
+    Column("mag_err", "mag_err"),
+    Column("az_deg", "Az(deg)"),
+    Column("el_deg", "El(deg)"),
+    Column("range_km", "Rg"),
     # Frame names are not kept (a '*' after one is read from the bytes, see `_saturated`).
     Column("frame", "filename", "text", 1),
 )
@@ -61,15 +77,36 @@ JD_COLUMNS = (Column("jd", "JD", "text", 32),) + _COMMON
 
 # Column labels as ccd_phot writes them; mag and Rg carry a band / unit suffix.
 _LABEL_PATTERNS = {
-    "Date": r"Date", "UT": r"UT", "JD": r"JD", "X": r"X", "Y": r"Y", "Xerr": r"Xerr", "Yerr": r"Yerr",
-    "Flux": r"Flux", "Flux_err": r"Flux_err", "mag": r"mag(\w*)", "mag_err": r"mag_err",
-    "Az(deg)": r"Az(\(deg\))?", "El(deg)": r"El(\(deg\))?", "Rg": r"Rg(\((Mm|Km|km)\))?", "filename": r"filename",
+    "Date": r"Date",
+    "UT": r"UT",
+    "JD": r"JD",
+    "X": r"X",
+    "Y": r"Y",
+    "Xerr": r"Xerr",
+    "Yerr": r"Yerr",
+    "Flux": r"Flux",
+    "Flux_err": r"Flux_err",
+    "mag": r"mag(\w*)",
+    "mag_err": r"mag_err",
+    "Az(deg)": r"Az(\(deg\))?",
+    "El(deg)": r"El(\(deg\))?",
+    "Rg": r"Rg(\((Mm|Km|km)\))?",
+    "filename": r"filename",
 }
 _KEY_VALUE = re.compile(r"^([A-Za-z][A-Za-z0-9_ ]*?)\s*=\s*(.*)$")
 _DATETIME = re.compile(r"^\d{4}-\d{2}-\d{2}[ T]\d{2}:\d{2}:\d{2}(\.\d+)?$")
 _EXTENSION_BAND = re.compile(r"\.ph([A-Z]|[ubvri])$")
-_STAMP_WORDS = {"start": 0.5, "begin": 0.5, "beginning": 0.5, "mid": 0.0, "middle": 0.0, "center": 0.0,
-                "centre": 0.0, "mid-exposure": 0.0, "end": -0.5}
+_STAMP_WORDS = {
+    "start": 0.5,
+    "begin": 0.5,
+    "beginning": 0.5,
+    "mid": 0.0,
+    "middle": 0.0,
+    "center": 0.0,
+    "centre": 0.0,
+    "mid-exposure": 0.0,
+    "end": -0.5,
+}
 _VARIANT_WORDS = {"ut": "ut", "utc": "ut", "date": "ut", "jd": "jd"}
 # The least range (km) at which a satellite is observed from the ground; values below it mean
 # the column is not in km.
@@ -80,13 +117,13 @@ _MIN_RANGE_KM = 100.0
 class _Header:
     """What the `#` lines of a ccd_phot file say (mutable only while being parsed)."""
 
-    keys: dict = field(default_factory=dict)         # key -> (value, line)
+    keys: dict = field(default_factory=dict)  # key -> (value, line)
     tle: tuple | None = None
     tle_line: int | None = None
     omm: MappingProxyType | None = None
     omm_line: int | None = None
-    times: list = field(default_factory=list)        # (text, line) of the first/last frame lines
-    notes: list = field(default_factory=list)        # other comment lines
+    times: list = field(default_factory=list)  # (text, line) of the first/last frame lines
+    notes: list = field(default_factory=list)  # other comment lines
     column_line: int = 0
     labels: tuple = ()
     variant: str = ""
@@ -151,8 +188,10 @@ class CcdPhotReader:
         """Build the pass from an already loaded file."""
         header = _parse_header(text)
         # Messages name the columns as this file labels them (magV, Rg(Mm), ...).
-        columns = tuple(replace(c, label=label) for c, label in
-                        zip(UT_COLUMNS if header.variant == "ut" else JD_COLUMNS, header.labels))
+        columns = tuple(
+            replace(c, label=label)
+            for c, label in zip(UT_COLUMNS if header.variant == "ut" else JD_COLUMNS, header.labels)
+        )
         exposure_s = _exposure(text, header)
         time_format = header.keys.get("Time_format", (None, None))
         _check_time_format_variant(text, header, time_format)
@@ -192,20 +231,40 @@ class CcdPhotReader:
         if fit_note(reduction):
             info["reduction"] = fit_note(reduction)
 
-        return (Pass(
-            norad=norad, name=name, band=band, site=site, exposure_s=exposure_s,
-            time_utc=to_datetime64(time_ns),
-            mag=mag, mag_err=rows["mag_err"], flux=flux, flux_err=rows["flux_err"],
-            az_deg=rows["az_deg"], el_deg=rows["el_deg"], range_km=rows["range_km"],
-            saturated=saturated, valid=np.isfinite(mag),
-            cospar=cospar, tle=header.tle, omm=header.omm,
-            time_convention="UTC, mid-exposure", time_shift_s=shift_s,
-            mag_convention=("standard magnitude reduced to 1000 km range: A - 2.5 log10(Flux/dt) + c X "
-                            "- 5 log10(Rg/1000 km), X = 1/sin(El), with the file's signed c (see reduction)"),
-            source_name=text.name, source_sha256=text.sha256, source_format=self.name,
-            reduction=reduction, mag_corrected=mag_corrected,
-            header=MappingProxyType(info),
-        ),)
+        return (
+            Pass(
+                norad=norad,
+                name=name,
+                band=band,
+                site=site,
+                exposure_s=exposure_s,
+                time_utc=to_datetime64(time_ns),
+                mag=mag,
+                mag_err=rows["mag_err"],
+                flux=flux,
+                flux_err=rows["flux_err"],
+                az_deg=rows["az_deg"],
+                el_deg=rows["el_deg"],
+                range_km=rows["range_km"],
+                saturated=saturated,
+                valid=np.isfinite(mag),
+                cospar=cospar,
+                tle=header.tle,
+                omm=header.omm,
+                time_convention="UTC, mid-exposure",
+                time_shift_s=shift_s,
+                mag_convention=(
+                    "standard magnitude reduced to 1000 km range: A - 2.5 log10(Flux/dt) + c X "
+                    "- 5 log10(Rg/1000 km), X = 1/sin(El), with the file's signed c (see reduction)"
+                ),
+                source_name=text.name,
+                source_sha256=text.sha256,
+                source_format=self.name,
+                reduction=reduction,
+                mag_corrected=mag_corrected,
+                header=MappingProxyType(info),
+            ),
+        )
 
 
 # -- header --------------------------------------------------------------------------------
@@ -228,8 +287,11 @@ def _parse_header(text: TextFile) -> _Header:
             _check_labels(text, header)
             return header
         if not commented:
-            raise text.error(number, "expected the column line ('# Date UT X Y ...' or '# JD X Y ...') before "
-                                     f"the data, found {stripped[:40]!r}")
+            raise text.error(
+                number,
+                "expected the column line ('# Date UT X Y ...' or '# JD X Y ...') before "
+                f"the data, found {stripped[:40]!r}",
+            )
         if body == "TLE:":
             number = _read_tle_block(text, header, number)
         elif body.startswith("OMM:"):
@@ -244,8 +306,10 @@ def _parse_header(text: TextFile) -> _Header:
             header.keys[match.group(1).strip()] = (match.group(2).strip(), number)
         else:
             header.notes.append(body)
-    raise text.error(text.n_lines, "the header ends without the column line ('# Date UT X Y ...' or "
-                                   "'# JD X Y ...') and no data rows follow")
+    raise text.error(
+        text.n_lines,
+        "the header ends without the column line ('# Date UT X Y ...' or '# JD X Y ...') and no data rows follow",
+    )
 
 
 def _read_tle_block(text: TextFile, header: _Header, number: int) -> int:
@@ -272,7 +336,8 @@ def _check_labels(text: TextFile, header: _Header) -> None:
     expected = [c.label for c in columns]
     found = header.labels
     good = len(found) == len(expected) and all(
-        re.fullmatch(_LABEL_PATTERNS[label], token) for label, token in zip(expected, found))
+        re.fullmatch(_LABEL_PATTERNS[label], token) for label, token in zip(expected, found)
+    )
     if not good:
         raise text.error(
             header.column_line,
@@ -301,12 +366,18 @@ def _check_time_format_variant(text: TextFile, header: _Header, time_format: tup
     words = [w for w in re.split(r"[\s,;/]+", value.lower()) if w]
     unknown = [w for w in words if w not in _STAMP_WORDS and w not in _VARIANT_WORDS and w != "exposure"]
     if unknown:
-        raise text.error(line, f"Time_format = {value!r} is not understood; write UT or JD, optionally "
-                               "followed by start, mid or end (the stamp's place in the exposure)")
+        raise text.error(
+            line,
+            f"Time_format = {value!r} is not understood; write UT or JD, optionally "
+            "followed by start, mid or end (the stamp's place in the exposure)",
+        )
     variants = {_VARIANT_WORDS[w] for w in words if w in _VARIANT_WORDS}
     if variants and variants != {header.variant}:
-        raise text.error(line, f"Time_format = {value!r} contradicts the column line, whose time columns are "
-                               f"{'Date UT' if header.variant == 'ut' else 'JD'}")
+        raise text.error(
+            line,
+            f"Time_format = {value!r} contradicts the column line, whose time columns are "
+            f"{'Date UT' if header.variant == 'ut' else 'JD'}",
+        )
 
 
 def _identity(text: TextFile, header: _Header) -> tuple[int, str, str]:
@@ -328,8 +399,11 @@ def _identity(text: TextFile, header: _Header) -> tuple[int, str, str]:
         if norad is None:
             norad = element_norad
         elif element_norad != norad:
-            raise text.error(line, f"the {source} is for NORAD {element_norad} but the header says NORAD {norad}; "
-                                   "the file mixes two objects")
+            raise text.error(
+                line,
+                f"the {source} is for NORAD {element_norad} but the header says NORAD {norad}; "
+                "the file mixes two objects",
+            )
     if norad is None:
         raise text.error(header.column_line, "the header names no object: add '# NORAD = <number>' or a TLE/OMM")
     name = header.keys.get("NAME", ("", 0))[0]
@@ -358,8 +432,11 @@ def _band(text: TextFile, header: _Header) -> tuple[str, str]:
     suffix = re.fullmatch(_LABEL_PATTERNS["mag"], mag_label).group(1)
     if suffix:
         return suffix, "magnitude column name"
-    raise text.error(header.column_line, "cannot tell the band: there is no '# Filter = ' line, the extension is "
-                                         "not .phX and the magnitude column is plain 'mag'; add '# Filter = V'")
+    raise text.error(
+        header.column_line,
+        "cannot tell the band: there is no '# Filter = ' line, the extension is "
+        "not .phX and the magnitude column is plain 'mag'; add '# Filter = V'",
+    )
 
 
 def _site(text: TextFile, header: _Header) -> tuple[Site, str]:
@@ -369,8 +446,10 @@ def _site(text: TextFile, header: _Header) -> tuple[Site, str]:
     if coordinates:
         if len(coordinates) < 3:
             missing = sorted({"SITE_LAT", "SITE_LON", "SITE_ELEV"} - set(coordinates))
-            raise text.error(keys[coordinates[0]][1], f"the site has {', '.join(coordinates)} but not "
-                                                       f"{', '.join(missing)}; give all three")
+            raise text.error(
+                keys[coordinates[0]][1],
+                f"the site has {', '.join(coordinates)} but not {', '.join(missing)}; give all three",
+            )
         values = {}
         for key in coordinates:
             value, line = keys[key]
@@ -379,15 +458,20 @@ def _site(text: TextFile, header: _Header) -> tuple[Site, str]:
             except ValueError:
                 raise text.error(line, f"{key} = {value!r} is not a number") from None
         try:
-            return Site(name or "unnamed site", values["SITE_LAT"], values["SITE_LON"], values["SITE_ELEV"]), "SITE_* lines"
+            return Site(
+                name or "unnamed site", values["SITE_LAT"], values["SITE_LON"], values["SITE_ELEV"]
+            ), "SITE_* lines"
         except ValueError as exc:
             raise text.error(keys["SITE_LAT"][1], str(exc)) from None
     if name:
         try:
             return Site.preset(name), "preset named by SITE_NAME"
         except KeyError:
-            raise text.error(keys["SITE_NAME"][1], f"SITE_NAME = {name!r} is not a known site and the header has no "
-                                                   "SITE_LAT/SITE_LON/SITE_ELEV lines; add them") from None
+            raise text.error(
+                keys["SITE_NAME"][1],
+                f"SITE_NAME = {name!r} is not a known site and the header has no "
+                "SITE_LAT/SITE_LON/SITE_ELEV lines; add them",
+            ) from None
     return DERENIVKA, "assumed Derenivka: no SITE_* lines (ccd_phot computed Az/El for Derenivka)"
 
 
@@ -414,19 +498,31 @@ def _stamps(text: TextFile, rows: Rows, variant: str) -> np.ndarray:
 
 def _check_values(text: TextFile, rows: Rows, columns: tuple[Column, ...]) -> None:
     """Physical bounds: positive flux and range, elevation within +-90, non-negative errors."""
-    check_rows(text, rows, columns, (
-        ("flux", lambda v: v > 0, "is not positive: ccd_phot never writes such a row because its magnitude "
-                                  "would be undefined; remove the row or fix the value"),
-        ("flux_err", lambda v: v >= 0, "is negative; an error must be zero or positive"),
-        ("mag_err", lambda v: v >= 0, "is negative; an error must be zero or positive"),
-        ELEVATION,
-        ("az_deg", lambda v: (v >= -360) & (v <= 360), "is not an azimuth in degrees"),
-        POSITIVE_RANGE,
-    ))
+    check_rows(
+        text,
+        rows,
+        columns,
+        (
+            (
+                "flux",
+                lambda v: v > 0,
+                "is not positive: ccd_phot never writes such a row because its magnitude "
+                "would be undefined; remove the row or fix the value",
+            ),
+            ("flux_err", lambda v: v >= 0, "is negative; an error must be zero or positive"),
+            ("mag_err", lambda v: v >= 0, "is negative; an error must be zero or positive"),
+            ELEVATION,
+            ("az_deg", lambda v: (v >= -360) & (v <= 360), "is not an azimuth in degrees"),
+            POSITIVE_RANGE,
+        ),
+    )
     median_km = float(np.median(rows["range_km"]))
     if median_km < _MIN_RANGE_KM:
-        raise text.error(int(rows.line[0]), f"the range column's median is {median_km:g}, so it is not in km as "
-                                            "ccd_phot writes it (even under the label Rg(Mm)); convert it to km")
+        raise text.error(
+            int(rows.line[0]),
+            f"the range column's median is {median_km:g}, so it is not in km as "
+            "ccd_phot writes it (even under the label Rg(Mm)); convert it to km",
+        )
 
 
 def _saturated(text: TextFile, rows: Rows) -> np.ndarray:

@@ -3,57 +3,85 @@
 Readers hand the raw header lines here; problems come back as `ValueError` with one sentence,
 which the reader turns into a `FormatError` at the right line.
 """
+
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 import json
+from pathlib import Path
 from types import MappingProxyType
-from typing import Mapping
 
-__all__ = ["parse_tle", "tle_norad", "tle_cospar", "parse_omm", "omm_norad", "tle_checksum"]
+__all__ = ["parse_tle", "tle_norad", "tle_cospar", "parse_omm", "omm_norad", "tle_checksum", "read_tle_catalogue"]
 
 _ALPHA5 = "ABCDEFGHJKLMNPQRSTUVWXYZ"  # Alpha-5 catalogue numbers skip I and O
+_TLE_LINE_LENGTH = 69
 
 
 def tle_checksum(line: str) -> int:
-    """TLE checksum of the first 68 characters: digits count their value, '-' counts 1, mod 10."""
+    """The modulo-10 checksum of a TLE line's first 68 characters.
+
+    Digits count their value, ``-`` counts 1, everything else (letters, blanks, ``.``, ``+``)
+    counts 0.
+
+    Examples
+    --------
+    >>> tle_checksum("1 22076U 92052A   24212.51246405 -.00000054  00000-0  29042-4 0  999")
+    4
+    """
     return sum(int(c) if c.isdigit() else (1 if c == "-" else 0) for c in line[:68]) % 10
 
 
-def parse_tle(lines: list[str]) -> tuple[str, ...]:
+def parse_tle(lines: str | Sequence[str]) -> tuple[str, ...]:
     """Check a TLE (optional title line, then lines 1 and 2) and return its lines.
+
+    The one check of element lines in the project: readers, `raycast.geometry.orbit.Satellite`
+    and TLE catalogues all call it. Accepts the variant some producers write, with ``+`` signs
+    and zero-padded fields (``+00000-0``, ``066.0418``); the checksum must be valid.
 
     Parameters
     ----------
-    lines : list of str
-        Two or three lines without comment markers, e.g. ``["0 TOPEX/POSEIDON", "1 22076U ...", "2 22076 ..."]``.
+    lines : str or sequence of str
+        Two or three lines (``["0 TOPEX/POSEIDON", "1 22076U ...", "2 22076 ..."]``), or one
+        newline-separated string; blank lines are ignored.
 
     Returns
     -------
     tuple of str
-        The lines with trailing whitespace removed.
+        The lines, stripped (the title line first when there is one).
 
     Raises
     ------
+    TypeError
+        When the lines are not text.
     ValueError
         Wrong line count, a line 1/2 not starting with its number, a length other than 69,
         a bad checksum, or lines 1 and 2 naming different satellites.
     """
-    lines = [line.rstrip() for line in lines]
+    if isinstance(lines, str):
+        lines = lines.splitlines()
+    if not isinstance(lines, Sequence) or not all(isinstance(s, str) for s in lines):
+        raise TypeError(f"TLE lines must be strings, got {lines!r}; pass two or three lines of text")
+    lines = [s.strip() for s in lines if s.strip()]
     if len(lines) not in (2, 3):
-        raise ValueError(f"a TLE has 2 or 3 lines, found {len(lines)}")
+        raise ValueError(f"a TLE has 2 or 3 lines but {len(lines)} were given: {lines!r}")
     first, second = lines[-2], lines[-1]
-    for number, line in (("1", first), ("2", second)):
-        if not line.startswith(number + " "):
-            raise ValueError(f"TLE line {number} should start with '{number} ', found {line[:10]!r}")
-        if len(line) != 69:
-            raise ValueError(f"TLE line {number} has {len(line)} characters instead of 69")
-        if not line[68].isdigit() or int(line[68]) != tle_checksum(line):
+    for number, line in ((1, first), (2, second)):
+        if not line.startswith(f"{number} "):
+            raise ValueError(f"TLE line {number} must start with '{number} ', got {line!r}")
+        if len(line) != _TLE_LINE_LENGTH:
             raise ValueError(
-                f"TLE line {number} has checksum {line[68]!r} but its characters give {tle_checksum(line)}; "
-                "the elements are corrupted"
+                f"TLE line {number} has {len(line)} characters instead of 69: {line!r}; check that it was copied whole"
+            )
+        if not line[68].isdigit() or tle_checksum(line) != int(line[68]):
+            raise ValueError(
+                f"TLE line {number} checksum is {tle_checksum(line)} but the line ends in "
+                f"{line[68]!r}: {line!r}; check that it was copied without changes"
             )
     if first[2:7] != second[2:7]:
-        raise ValueError(f"TLE lines 1 and 2 name different satellites ({first[2:7]!r} and {second[2:7]!r})")
+        raise ValueError(
+            f"TLE lines disagree on the catalogue number ({first[2:7]!r} vs {second[2:7]!r}); "
+            "give both lines of the same element set"
+        )
     return tuple(lines)
 
 
@@ -104,3 +132,33 @@ def omm_norad(record: Mapping) -> int:
         return int(value)
     except (TypeError, ValueError):
         raise ValueError(f"the OMM NORAD_CAT_ID {value!r} is not an integer") from None
+
+
+def read_tle_catalogue(path) -> list[tuple[str, ...]]:
+    """Every element set in a TLE file (a ``tles.txt``-style list of 2- or 3-line sets).
+
+    Title lines (``0 NAME`` or ``NAME``) are kept with their set; ``#`` lines and blank lines are
+    skipped. Each set is checked by `parse_tle`.
+
+    Raises
+    ------
+    ValueError
+        When the file holds no set, or a set fails its checks (the message names the line).
+    """
+    lines = [
+        (number, line.rstrip())
+        for number, line in enumerate(Path(path).read_text().splitlines(), 1)
+        if line.strip() and not line.lstrip().startswith("#")
+    ]
+    sets = []
+    for index, (number, line) in enumerate(lines):
+        if line.startswith("1 ") and index + 1 < len(lines) and lines[index + 1][1].startswith("2 "):
+            before = lines[index - 1][1] if index > 0 else ""
+            title = [before] if before and before[:2] not in ("1 ", "2 ") else []
+            try:
+                sets.append(parse_tle(title + [line, lines[index + 1][1]]))
+            except ValueError as error:
+                raise ValueError(f"{path}:{number}: {error}") from None
+    if not sets:
+        raise ValueError(f"{path} holds no TLE (pairs of lines starting '1 ' and '2 '); give a TLE file")
+    return sets

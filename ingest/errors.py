@@ -1,4 +1,5 @@
 """Errors raised for bad observation files."""
+
 from __future__ import annotations
 
 from pathlib import Path

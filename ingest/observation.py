@@ -3,17 +3,19 @@
 `Pass` is the unit that flows through the project: readers return it, the archive stores it,
 period search and fitting read it. It is immutable; operations return new objects.
 """
+
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from types import MappingProxyType
-from typing import Mapping
 
 import numpy as np
 
-from raycast.site import Site
+from ingest.reduction import Reduction
+from ingest.site import Site
 
-__all__ = ["Pass", "Reduction", "ARRAY_FIELDS"]
+__all__ = ["Pass", "ARRAY_FIELDS"]
 
 # Per-sample arrays of a pass, in storage order, with their dtypes.
 ARRAY_FIELDS = {
@@ -28,39 +30,6 @@ ARRAY_FIELDS = {
     "saturated": "bool",
     "valid": "bool",
 }
-
-
-@dataclass(frozen=True)
-class Reduction:
-    """Photometric reduction recovered from a file by regression.
-
-    The files obey ``mag = A + m_inst + c * X + m_r`` with ``m_inst = -2.5 log10(flux / dt)``,
-    ``X = 1 / sin(el)`` and ``m_r = -5 log10(range_km / 1000)``. For a correct reduction
-    ``c = -k`` (k > 0 the extinction coefficient); ccd_phot before 2024-08-01 wrote ``c = +k``.
-
-    Attributes
-    ----------
-    zero_point_mag : float
-        A, the zero point.
-    extinction_term_mag : float
-        c, the signed coefficient of airmass as found in the file.
-    rms_mag : float
-        RMS of the regression residuals (rounding of the file's magnitudes: ~3e-4 mag).
-    n_points : int
-        Rows used in the regression.
-    sign_error : bool
-        True when the file added the extinction term (c > 0).
-    zero_point_err_mag, extinction_term_err_mag : float
-        Standard errors of A and c from the regression (NaN when unknown).
-    """
-
-    zero_point_mag: float
-    extinction_term_mag: float
-    rms_mag: float
-    n_points: int
-    sign_error: bool
-    zero_point_err_mag: float = float("nan")
-    extinction_term_err_mag: float = float("nan")
 
 
 @dataclass(frozen=True, eq=False)
@@ -154,9 +123,7 @@ class Pass:
             if n is None:
                 n = value.shape[0]
             elif value.shape[0] != n:
-                raise ValueError(
-                    f"pass {self.source_name!r}: {name} has {value.shape[0]} samples but time_utc has {n}"
-                )
+                raise ValueError(f"pass {self.source_name!r}: {name} has {value.shape[0]} samples but time_utc has {n}")
             value.setflags(write=False)
             object.__setattr__(self, name, value)
         if self.mag_corrected is not None:
@@ -173,26 +140,6 @@ class Pass:
             raise ValueError(f"pass {self.source_name!r}: exposure_s={self.exposure_s!r} must be positive")
         if np.any(np.diff(self.time_utc.view("int64")) <= 0):
             raise ValueError(f"pass {self.source_name!r}: time_utc must be strictly increasing")
-
-    @classmethod
-    def from_file(cls, path) -> "Pass":
-        """The one pass of an observation file; `ingest.read_file` returns all passes of any file.
-
-        Raises
-        ------
-        ValueError
-            When the file holds several passes (a ``.phc`` file holds B and V).
-        FormatError
-            When the file is not a valid observation file.
-        """
-        from ingest.readers import read_file
-
-        passes = read_file(path)
-        if len(passes) != 1:
-            bands = ", ".join(p.band for p in passes)
-            raise ValueError(f"{path} holds {len(passes)} passes (bands {bands}); use ingest.read_file(path) "
-                             "to get all of them")
-        return passes[0]
 
     # Headers and OMM records are read-only mappings (MappingProxyType), which pickle cannot
     # send to another process; they travel as plain dicts and are frozen again on arrival.
@@ -224,6 +171,14 @@ class Pass:
         return self.time_utc[-1]
 
     @property
+    def time(self):
+        """The mid-exposure times as an astropy ``Time`` (UTC)."""
+        # astropy.time loads in about half a second; readers and the archive do not need it.
+        from astropy.time import Time
+
+        return Time(self.time_utc, scale="utc")
+
+    @property
     def duration_s(self) -> float:
         """Seconds between the first and last sample."""
         return float((self.time_utc[-1] - self.time_utc[0]) / np.timedelta64(1, "s"))
@@ -238,22 +193,31 @@ class Pass:
         """(n,) the corrected magnitude where the file needed a correction, else `mag`."""
         return self.mag if self.mag_corrected is None else self.mag_corrected
 
-    def replace(self, **changes) -> "Pass":
+    def replace(self, **changes) -> Pass:
         """A copy with some fields changed (validated again)."""
         return replace(self, **changes)
 
     def to_pandas(self):
         """The per-sample arrays as a DataFrame indexed by UTC time."""
+        # pandas costs about half a second to import; only this conversion needs it.
         import pandas as pd
 
         columns = {name: getattr(self, name) for name in ARRAY_FIELDS if name != "time_utc"}
         if self.mag_corrected is not None:
             columns["mag_corrected"] = self.mag_corrected
         frame = pd.DataFrame(columns, index=pd.DatetimeIndex(self.time_utc, name="time_utc"))
-        frame.attrs.update(norad=self.norad, name=self.name, band=self.band, site=self.site.name,
-                           exposure_s=self.exposure_s, source_name=self.source_name)
+        frame.attrs.update(
+            norad=self.norad,
+            name=self.name,
+            band=self.band,
+            site=self.site.name,
+            exposure_s=self.exposure_s,
+            source_name=self.source_name,
+        )
         return frame
 
     def __repr__(self) -> str:
-        return (f"Pass(norad={self.norad}, name={self.name!r}, band={self.band!r}, site={self.site.name!r}, "
-                f"start={str(self.start_utc)[:23]}, n={len(self)}, exposure_s={self.exposure_s})")
+        return (
+            f"Pass(norad={self.norad}, name={self.name!r}, band={self.band!r}, site={self.site.name!r}, "
+            f"start={str(self.start_utc)[:23]}, n={len(self)}, exposure_s={self.exposure_s})"
+        )

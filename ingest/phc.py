@@ -35,6 +35,7 @@ Decisions, with the evidence for each (docs/formats.md has the long form):
   columns are kept as written (the file's own magnitudes were reduced with them) and the header
   says so.
 """
+
 from __future__ import annotations
 
 import re
@@ -45,24 +46,38 @@ import numpy as np
 from ingest import elements
 from ingest.observation import Pass
 from ingest.reduction import fit_note, fit_reduction, sign_corrected_mag
+from ingest.site import UZHHOROD
 from ingest.table import (
-    ELEVATION, POSITIVE_RANGE, Column, Rows, check_increasing, check_parsed, check_rows, read_rows,
+    ELEVATION,
+    POSITIVE_RANGE,
+    Column,
+    Rows,
+    check_increasing,
+    check_parsed,
+    check_rows,
+    read_rows,
 )
 from ingest.textfile import TextFile
 from ingest.times import NS_PER_DAY, NS_PER_S, time_of_day_ns, to_datetime64
-from raycast.site import UZHHOROD
 
 __all__ = ["PhcReader", "PHC_COLUMNS", "SENTINEL_MAGS", "poisson_flux_err"]
 
 PHC_COLUMNS = (
     Column("ut", "UT TIME", "text", 32),
-    Column("flux_b", "ImpB-fon"), Column("flux_v", "ImpV-fon"),
-    Column("sky_b", "FonB"), Column("sky_v", "FonV"),
-    Column("mag_b", "mB"), Column("mag_v", "mV"),
-    Column("az_deg", "Az(deg)"), Column("el_deg", "El(deg)"), Column("range_km", "Rg(Mm)"),
+    Column("flux_b", "ImpB-fon"),
+    Column("flux_v", "ImpV-fon"),
+    Column("sky_b", "FonB"),
+    Column("sky_v", "FonV"),
+    Column("mag_b", "mB"),
+    Column("mag_v", "mV"),
+    Column("az_deg", "Az(deg)"),
+    Column("el_deg", "El(deg)"),
+    Column("range_km", "Rg(Mm)"),
 )
 SENTINEL_MAGS = (10.0, 12.0, 13.0)
-_COLUMN_LINE = re.compile(r"^UT\s+TIME\s+ImpB-fon\s+ImpV-fon\s+FonB\s+FonV\s+mB\s+mV\s+Az\(deg\)\s+El\(deg\)\s+Rg\((Mm|Km|km)\)$")
+_COLUMN_LINE = re.compile(
+    r"^UT\s+TIME\s+ImpB-fon\s+ImpV-fon\s+FonB\s+FonV\s+mB\s+mV\s+Az\(deg\)\s+El\(deg\)\s+Rg\((Mm|Km|km)\)$"
+)
 _FIRST_LINE = re.compile(r"^(\d{4}-\d{2}-\d{2}) (\d{2}:\d{2}:\d{2}(\.\d+)?)$")
 _KEYS = {"dt": "dt", "COSPAR ID": "cospar", "NORAD ID": "norad", "NAME": "name"}
 _HALF_DAY_NS = NS_PER_DAY // 2
@@ -102,8 +117,9 @@ class PhcReader:
         """True when line 1 is a date and time and a phc column line follows within the header."""
         if not _FIRST_LINE.match(text.line(1).lstrip("\ufeff").strip()):
             return False
-        return any(text.line(k).strip().startswith("UT TIME")
-                   for k in range(2, min(text.n_lines, _MAX_HEADER_LINES) + 1))
+        return any(
+            text.line(k).strip().startswith("UT TIME") for k in range(2, min(text.n_lines, _MAX_HEADER_LINES) + 1)
+        )
 
     def read(self, path) -> tuple[Pass, ...]:
         """Read `path`; raise `FormatError` with the line and reason when it is not a valid phc file."""
@@ -126,8 +142,10 @@ class PhcReader:
             format="phc",
             first_sample_utc=first_time,
             file_time_stamps="integration start",
-            az_el_range_site=("Derenivka: the phc writer computed Az(deg), El(deg) and Rg for the Derenivka "
-                              "coordinates (48.5635505 N, 22.453751 E, 231 m) although the photometer is at Uzhhorod"),
+            az_el_range_site=(
+                "Derenivka: the phc writer computed Az(deg), El(deg) and Rg for the Derenivka "
+                "coordinates (48.5635505 N, 22.453751 E, 231 m) although the photometer is at Uzhhorod"
+            ),
             range_label=text.line(column_line).split()[-1],
             flux_err_model="sqrt(Imp-fon + 2 Fon): Poisson noise of the raw count and of a one-sample sky",
         )
@@ -151,24 +169,47 @@ class PhcReader:
                 mag_err = np.where(valid, 2.5 / np.log(10.0) * flux_err / flux, np.nan)
             mag = np.where(valid, written, np.nan)
             reduction = fit_reduction(mag, flux, exposure_s, rows["el_deg"], rows["range_km"], valid=valid)
-            mag_corrected = (sign_corrected_mag(mag, rows["el_deg"], reduction)
-                             if reduction is not None and reduction.sign_error else None)
+            mag_corrected = (
+                sign_corrected_mag(mag, rows["el_deg"], reduction)
+                if reduction is not None and reduction.sign_error
+                else None
+            )
             band_info = dict(info, n_sentinel=int(sentinel.sum()), n_nonpositive_flux=int((flux <= 0).sum()))
             if fit_note(reduction):
                 band_info["reduction"] = fit_note(reduction)
-            passes.append(Pass(
-                norad=norad, name=name, band=band, site=UZHHOROD, exposure_s=exposure_s,
-                time_utc=time_utc, mag=mag, mag_err=mag_err, flux=flux, flux_err=flux_err,
-                az_deg=rows["az_deg"], el_deg=rows["el_deg"], range_km=rows["range_km"],
-                saturated=np.zeros(len(rows), dtype=bool), valid=valid,
-                cospar=cospar, tle=tle,
-                time_convention="UTC, mid-exposure", time_shift_s=shift_s,
-                mag_convention=("standard magnitude reduced to 1000 km range: A - 2.5 log10(Imp/dt) - k X "
-                                "- 5 log10(Rg/1000 km) with X and Rg for Derenivka (see header)"),
-                source_name=text.name, source_sha256=text.sha256, source_format=self.name,
-                reduction=reduction, mag_corrected=mag_corrected,
-                header=MappingProxyType(band_info),
-            ))
+            passes.append(
+                Pass(
+                    norad=norad,
+                    name=name,
+                    band=band,
+                    site=UZHHOROD,
+                    exposure_s=exposure_s,
+                    time_utc=time_utc,
+                    mag=mag,
+                    mag_err=mag_err,
+                    flux=flux,
+                    flux_err=flux_err,
+                    az_deg=rows["az_deg"],
+                    el_deg=rows["el_deg"],
+                    range_km=rows["range_km"],
+                    saturated=np.zeros(len(rows), dtype=bool),
+                    valid=valid,
+                    cospar=cospar,
+                    tle=tle,
+                    time_convention="UTC, mid-exposure",
+                    time_shift_s=shift_s,
+                    mag_convention=(
+                        "standard magnitude reduced to 1000 km range: A - 2.5 log10(Imp/dt) - k X "
+                        "- 5 log10(Rg/1000 km) with X and Rg for Derenivka (see header)"
+                    ),
+                    source_name=text.name,
+                    source_sha256=text.sha256,
+                    source_format=self.name,
+                    reduction=reduction,
+                    mag_corrected=mag_corrected,
+                    header=MappingProxyType(band_info),
+                )
+            )
         return tuple(passes)
 
 
@@ -200,8 +241,11 @@ def _header(text: TextFile):
                     raise text.error(tle_first, f"{exc}; fix the '% TLE:' block") from None
             return keys, tle, number, notes
         if line.startswith("UT TIME"):
-            raise text.error(number, f"the column line reads {line!r}; expected 'UT TIME ImpB-fon ImpV-fon FonB "
-                                     "FonV mB mV Az(deg) El(deg) Rg(Mm)'")
+            raise text.error(
+                number,
+                f"the column line reads {line!r}; expected 'UT TIME ImpB-fon ImpV-fon FonB "
+                "FonV mB mV Az(deg) El(deg) Rg(Mm)'",
+            )
         if line.startswith("%"):
             body = line.lstrip("%").strip()
             if body and body != "TLE:":
@@ -213,8 +257,10 @@ def _header(text: TextFile):
             keys[key.strip()] = (value.strip(), number)
         elif line and number > 2:
             notes.append(line)
-    raise text.error(min(text.n_lines, _MAX_HEADER_LINES), "no 'UT TIME ImpB-fon ...' column line in the header "
-                                                           "and no data rows follow")
+    raise text.error(
+        min(text.n_lines, _MAX_HEADER_LINES),
+        "no 'UT TIME ImpB-fon ...' column line in the header and no data rows follow",
+    )
 
 
 def _positive_float(text: TextFile, keys: dict, key: str, example: str) -> float:
@@ -243,8 +289,9 @@ def _norad(text: TextFile, keys: dict, tle) -> int:
         if norad is None:
             norad = from_tle
         elif from_tle != norad:
-            raise text.error(keys["NORAD ID"][1], f"NORAD ID={norad} but the TLE is for {from_tle}; "
-                                                  "the file mixes two objects")
+            raise text.error(
+                keys["NORAD ID"][1], f"NORAD ID={norad} but the TLE is for {from_tle}; the file mixes two objects"
+            )
     if norad is None or norad <= 0:
         raise text.error(None, "the header names no object: add 'NORAD ID=<number>' or a '% TLE:' block")
     return norad
@@ -268,8 +315,14 @@ def _stamps(text: TextFile, rows: Rows, midnight_ns: int, start_tod_ns: int) -> 
 
 def _check_geometry(text: TextFile, rows: Rows) -> None:
     negative_sky = "is negative; a sky count cannot be"
-    check_rows(text, rows, PHC_COLUMNS, (
-        ELEVATION, POSITIVE_RANGE,
-        ("sky_b", lambda v: v >= 0, negative_sky),
-        ("sky_v", lambda v: v >= 0, negative_sky),
-    ))
+    check_rows(
+        text,
+        rows,
+        PHC_COLUMNS,
+        (
+            ELEVATION,
+            POSITIVE_RANGE,
+            ("sky_b", lambda v: v >= 0, negative_sky),
+            ("sky_v", lambda v: v >= 0, negative_sky),
+        ),
+    )

@@ -4,17 +4,17 @@ Detection looks at the content (the header lines), never only at the extension, 
 ``.txt`` copy of a ccd_phot file reads as ccd_phot and a ``.phV`` file holding something else
 is refused with a clear message.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
 
 from ingest.ccd_phot import CcdPhotReader
-from ingest.errors import FormatError
 from ingest.observation import Pass
 from ingest.phc import PhcReader
 from ingest.textfile import TextFile
 
-__all__ = ["READERS", "detect_format", "read_file"]
+__all__ = ["READERS", "detect_format", "read_file", "read_pass"]
 
 # Name -> reader; detection tries them in this order.
 READERS = {
@@ -35,9 +35,12 @@ def detect_format(text: TextFile) -> str:
         if reader.sniff(text):
             return name
     first = text.line(1).strip()[:60]
-    raise text.error(1, f"unknown file format (line 1 reads {first!r}); expected a ccd_phot light curve "
-                        "('# TLE:' header and a '# Date UT ...' or '# JD ...' column line) or a photometer "
-                        ".phc file (a date and time on line 1 and a 'UT TIME ImpB-fon ...' column line)")
+    raise text.error(
+        1,
+        f"unknown file format (line 1 reads {first!r}); expected a ccd_phot light curve "
+        "('# TLE:' header and a '# Date UT ...' or '# JD ...' column line) or a photometer "
+        ".phc file (a date and time on line 1 and a 'UT TIME ImpB-fon ...' column line)",
+    )
 
 
 def read_file(path: str | Path, format: str = "auto") -> tuple[Pass, ...]:
@@ -72,3 +75,22 @@ def read_file(path: str | Path, format: str = "auto") -> tuple[Pass, ...]:
     text = TextFile.from_path(path)
     name = detect_format(text) if format == "auto" else format
     return READERS[name].parse(text)
+
+
+def read_pass(path: str | Path) -> Pass:
+    """The one pass of an observation file; `read_file` returns all passes of any file.
+
+    Raises
+    ------
+    ValueError
+        When the file holds several passes (a ``.phc`` file holds B and V).
+    FormatError
+        When the file is not a valid observation file.
+    """
+    passes = read_file(path)
+    if len(passes) != 1:
+        bands = ", ".join(p.band for p in passes)
+        raise ValueError(
+            f"{path} holds {len(passes)} passes (bands {bands}); use ingest.read_file(path) to get all of them"
+        )
+    return passes[0]

@@ -15,15 +15,24 @@ printed magnitudes (~3e-4 mag RMS); ``c > 0`` is the sign error, and the correct
 The plane-parallel airmass is what the files used; it is kept here on purpose (a refined
 airmass would not reproduce the files' numbers).
 """
+
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
-from ingest.observation import Reduction
-
 __all__ = [
-    "instrumental_mag", "airmass", "range_correction_mag", "standard_mag",
-    "fit_reduction", "sign_corrected_mag", "fit_note", "REFERENCE_RANGE_KM", "LAW_RMS_LIMIT_MAG",
+    "Reduction",
+    "instrumental_mag",
+    "airmass",
+    "range_correction_mag",
+    "standard_mag",
+    "fit_reduction",
+    "sign_corrected_mag",
+    "fit_note",
+    "REFERENCE_RANGE_KM",
+    "LAW_RMS_LIMIT_MAG",
 ]
 
 REFERENCE_RANGE_KM = 1000.0
@@ -32,6 +41,39 @@ REFERENCE_RANGE_KM = 1000.0
 LAW_RMS_LIMIT_MAG = 0.003
 # The extinction term is called a sign error only when it is positive by this many standard errors.
 _SIGNIFICANCE = 5.0
+
+
+@dataclass(frozen=True)
+class Reduction:
+    """Photometric reduction recovered from a file by regression.
+
+    The files obey ``mag = A + m_inst + c * X + m_r`` with ``m_inst = -2.5 log10(flux / dt)``,
+    ``X = 1 / sin(el)`` and ``m_r = -5 log10(range_km / 1000)``. For a correct reduction
+    ``c = -k`` (k > 0 the extinction coefficient); ccd_phot before 2024-08-01 wrote ``c = +k``.
+
+    Attributes
+    ----------
+    zero_point_mag : float
+        A, the zero point.
+    extinction_term_mag : float
+        c, the signed coefficient of airmass as found in the file.
+    rms_mag : float
+        RMS of the regression residuals (rounding of the file's magnitudes: ~3e-4 mag).
+    n_points : int
+        Rows used in the regression.
+    sign_error : bool
+        True when the file added the extinction term (c > 0).
+    zero_point_err_mag, extinction_term_err_mag : float
+        Standard errors of A and c from the regression (NaN when unknown).
+    """
+
+    zero_point_mag: float
+    extinction_term_mag: float
+    rms_mag: float
+    n_points: int
+    sign_error: bool
+    zero_point_err_mag: float = float("nan")
+    extinction_term_err_mag: float = float("nan")
 
 
 def instrumental_mag(flux: np.ndarray, exposure_s: float | np.ndarray) -> np.ndarray:
@@ -116,8 +158,12 @@ def standard_mag(flux, exposure_s, el_deg, range_km, zero_point_mag: float, exti
     -------
     (n,) float
     """
-    return (zero_point_mag + instrumental_mag(flux, exposure_s) - extinction_mag * airmass(el_deg)
-            + range_correction_mag(range_km))
+    return (
+        zero_point_mag
+        + instrumental_mag(flux, exposure_s)
+        - extinction_mag * airmass(el_deg)
+        + range_correction_mag(range_km)
+    )
 
 
 def fit_reduction(mag, flux, exposure_s, el_deg, range_km, valid=None) -> Reduction | None:
@@ -200,6 +246,8 @@ def fit_note(reduction: Reduction | None) -> str | None:
     if reduction is None:
         return "not fitted: fewer than 3 usable rows or no spread in airmass"
     if reduction.rms_mag >= LAW_RMS_LIMIT_MAG:
-        return (f"the magnitudes do not follow the reduction law (RMS {reduction.rms_mag:.4f} mag, "
-                f"more than {LAW_RMS_LIMIT_MAG} mag); no sign correction applied")
+        return (
+            f"the magnitudes do not follow the reduction law (RMS {reduction.rms_mag:.4f} mag, "
+            f"more than {LAW_RMS_LIMIT_MAG} mag); no sign correction applied"
+        )
     return None

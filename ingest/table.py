@@ -5,6 +5,7 @@ count enforced). Only when it fails does `_diagnose` tokenise the bytes with num
 the first offending line, column and value, so a clean 2500-row file parses in a few ms and
 a bad one still gets a precise message.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -14,7 +15,16 @@ import numpy as np
 
 from ingest.textfile import TextFile
 
-__all__ = ["Column", "Rows", "read_rows", "check_rows", "check_parsed", "check_increasing", "ELEVATION", "POSITIVE_RANGE"]
+__all__ = [
+    "Column",
+    "Rows",
+    "read_rows",
+    "check_rows",
+    "check_parsed",
+    "check_increasing",
+    "ELEVATION",
+    "POSITIVE_RANGE",
+]
 
 
 @dataclass(frozen=True)
@@ -75,14 +85,14 @@ def read_rows(text: TextFile, first_line: int, columns: tuple[Column, ...]) -> R
         truncated file); a value that is not a number; a NaN or infinite value.
     """
     body_lines = np.arange(first_line, text.n_lines + 1)
-    body = text.data[text.offset(first_line):]
+    body = text.data[text.offset(first_line) :]
     if not body or body.isspace():
         raise text.error(first_line, "the header is not followed by any data rows")
     try:
         values = np.loadtxt(io.BytesIO(body), dtype=_dtype(columns), comments=None, ndmin=1)
     except ValueError as exc:
         raise _diagnose(text, first_line, columns, exc) from None
-    nonblank = body_lines if len(values) == len(body_lines) else body_lines[~text.blank[first_line - 1:]]
+    nonblank = body_lines if len(values) == len(body_lines) else body_lines[~text.blank[first_line - 1 :]]
     if len(nonblank) != len(values):
         raise text.error(None, f"found {len(values)} data rows in {len(nonblank)} non-blank lines; the file is damaged")
     rows = Rows({c.key: np.ascontiguousarray(values[c.key]) for c in columns}, nonblank.astype(np.int64))
@@ -131,10 +141,14 @@ def check_increasing(text: TextFile, rows: Rows, stamps_ns: np.ndarray, time_key
     if len(bad):
         k = int(bad[0])
         kind = "repeats" if step[k] == 0 else "is earlier than"
-        this, previous = (" ".join(rows[key][row].decode("utf-8", "replace") for key in time_keys)
-                          for row in (k + 1, k))
-        raise text.error(int(rows.line[k + 1]), f"time {this} {kind} the previous row's {previous} "
-                                                f"(line {int(rows.line[k])}); rows must be in time order without repeats")
+        this, previous = (
+            " ".join(rows[key][row].decode("utf-8", "replace") for key in time_keys) for row in (k + 1, k)
+        )
+        raise text.error(
+            int(rows.line[k + 1]),
+            f"time {this} {kind} the previous row's {previous} "
+            f"(line {int(rows.line[k])}); rows must be in time order without repeats",
+        )
 
 
 # Checks shared by the formats' geometry columns.

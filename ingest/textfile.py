@@ -6,6 +6,7 @@ could use: an empty file, a file larger than `MAX_FILE_BYTES`, a line longer tha
 binary bytes, UTF-16/32 text and bytes that are not UTF-8. All checks are vectorised over the
 byte buffer, so a clean 400 kB file costs well under a millisecond.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -65,7 +66,7 @@ class TextFile:
     raw_sha256: str
 
     @classmethod
-    def from_path(cls, path: str | Path) -> "TextFile":
+    def from_path(cls, path: str | Path) -> TextFile:
         """Read `path` with the bounds above; raise `FormatError` for anything not line-oriented text.
 
         OS errors (missing file, permission, a directory) propagate unchanged: they are not
@@ -78,7 +79,8 @@ class TextFile:
                 raise FormatError(path, None, "the file is empty; an observation file needs a header and data rows")
             if size > MAX_FILE_BYTES:
                 raise FormatError(
-                    path, None,
+                    path,
+                    None,
                     f"the file is {size / 2**20:.1f} MiB, more than the {MAX_FILE_BYTES // 2**20} MiB "
                     "an observation file can hold; split it or check that it is an observation file",
                 )
@@ -89,16 +91,22 @@ class TextFile:
         return cls.from_bytes(path, data)
 
     @classmethod
-    def from_bytes(cls, path: str, data: bytes) -> "TextFile":
+    def from_bytes(cls, path: str, data: bytes) -> TextFile:
         """Check `data` (the whole file) and build its line table; `path` is only for messages."""
         raw_sha256 = hashlib.sha256(data).hexdigest()
         if data.isspace():
-            raise FormatError(path, None, "the file is empty (only whitespace); an observation file needs a header and data rows")
+            raise FormatError(
+                path, None, "the file is empty (only whitespace); an observation file needs a header and data rows"
+            )
         if len(data) > MAX_FILE_BYTES:
-            raise FormatError(path, None, f"the file is larger than {MAX_FILE_BYTES // 2**20} MiB; check that it is an observation file")
+            raise FormatError(
+                path,
+                None,
+                f"the file is larger than {MAX_FILE_BYTES // 2**20} MiB; check that it is an observation file",
+            )
         _check_head(path, data[:HEAD_BYTES])
         if data.startswith(_UTF8_BOM):
-            data = data[len(_UTF8_BOM):]
+            data = data[len(_UTF8_BOM) :]
         buf = np.frombuffer(data, dtype=np.uint8)
         newlines = np.flatnonzero(buf == _NEWLINE)
         ends_with_newline = bool(len(newlines)) and newlines[-1] == len(buf) - 1
@@ -116,7 +124,8 @@ class TextFile:
             line = int(np.searchsorted(line_ends, offset)) + 1
             column = offset - int(line_starts[line - 1]) + 1
             raise FormatError(
-                path, line,
+                path,
+                line,
                 f"control byte 0x{buf[offset]:02x} at column {column}: this is binary data, not a text observation file",
             )
 
@@ -125,7 +134,8 @@ class TextFile:
         if len(too_long):
             line = int(too_long[0]) + 1
             raise FormatError(
-                path, line,
+                path,
+                line,
                 f"the line is {int(lengths[line - 1])} bytes long, more than {MAX_LINE_BYTES}; "
                 "this is not a text observation file",
             )
@@ -137,7 +147,8 @@ class TextFile:
             line = int(np.searchsorted(line_ends, exc.start)) + 1
             column = exc.start - int(line_starts[line - 1]) + 1
             raise FormatError(
-                path, line,
+                path,
+                line,
                 f"byte 0x{data[exc.start]:02x} at column {column} is not UTF-8 text; "
                 "the file is in another encoding: save it as UTF-8 or ASCII",
             ) from None
@@ -145,8 +156,9 @@ class TextFile:
         # Trailing carriage returns (CRLF files) are not part of a line.
         has_cr = (lengths > 0) & (buf[np.maximum(line_ends - 1, 0)] == 13)
         line_ends = line_ends - has_cr
-        return cls(path, data, line_starts.astype(np.int64), line_ends.astype(np.int64),
-                   bool(ends_with_newline), raw_sha256)
+        return cls(
+            path, data, line_starts.astype(np.int64), line_ends.astype(np.int64), bool(ends_with_newline), raw_sha256
+        )
 
     # -- lines ------------------------------------------------------------------------------
     @property
@@ -156,7 +168,7 @@ class TextFile:
 
     def line(self, number: int) -> str:
         """Line `number` (1-based) as text, without its newline."""
-        return self.data[self.line_starts[number - 1]:self.line_ends[number - 1]].decode("utf-8")
+        return self.data[self.line_starts[number - 1] : self.line_ends[number - 1]].decode("utf-8")
 
     def lines(self, first: int, last: int) -> list[str]:
         """Lines `first`..`last` inclusive (1-based) as text."""
@@ -194,6 +206,7 @@ def _check_head(path: str, head: bytes) -> None:
     limit = MAX_LINE_BYTES + 2  # a line of MAX_LINE_BYTES plus CR LF
     if len(head) >= limit and b"\n" not in head[:limit]:
         raise FormatError(
-            path, 1,
+            path,
+            1,
             f"the first line is longer than {MAX_LINE_BYTES} bytes; this is not a text observation file",
         )

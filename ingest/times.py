@@ -9,6 +9,7 @@ mask of the entries that parsed; callers turn the first bad entry into a `Format
 The Julian date is parsed as an integer day and a decimal fraction separately, so the JD
 column keeps all its printed digits (to the nanosecond) instead of the ~40 us of a float64 JD.
 """
+
 from __future__ import annotations
 
 import re
@@ -16,9 +17,16 @@ import re
 import numpy as np
 
 __all__ = [
-    "NS_PER_DAY", "NS_PER_S", "UNIX_EPOCH_JD",
-    "time_of_day_ns", "date_days", "julian_date_ns",
-    "to_datetime64", "format_date_time_ms", "format_iso_us", "julian_date_repr",
+    "NS_PER_DAY",
+    "NS_PER_S",
+    "UNIX_EPOCH_JD",
+    "time_of_day_ns",
+    "date_days",
+    "julian_date_ns",
+    "to_datetime64",
+    "format_date_time_ms",
+    "format_iso_us",
+    "julian_date_repr",
 ]
 
 NS_PER_S = 1_000_000_000
@@ -72,7 +80,7 @@ def time_of_day_ns(column: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return np.zeros(n, np.int64), np.zeros(n, bool)
     is_digit = (chars >= 48) & (chars <= 57)
     value = chars - 48
-    ok = (is_digit[:, [0, 1, 3, 4, 6, 7]].all(axis=1) & (chars[:, 2] == 58) & (chars[:, 5] == 58))
+    ok = is_digit[:, [0, 1, 3, 4, 6, 7]].all(axis=1) & (chars[:, 2] == 58) & (chars[:, 5] == 58)
     hours = value[:, 0].astype(np.int64) * 10 + value[:, 1]
     minutes = value[:, 3].astype(np.int64) * 10 + value[:, 4]
     seconds = value[:, 6].astype(np.int64) * 10 + value[:, 7]
@@ -156,7 +164,7 @@ def julian_date_ns(column: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     # columns, the fraction left-aligned in _JD_FRAC_DIGITS columns (18 digits fit in int64;
     # further ones are far below a nanosecond), NUL-padded on both sides.
     padded = np.zeros((n, _JD_INT_DIGITS + width + _JD_FRAC_DIGITS), dtype=np.uint8)
-    padded[:, _JD_INT_DIGITS:_JD_INT_DIGITS + width] = chars
+    padded[:, _JD_INT_DIGITS : _JD_INT_DIGITS + width] = chars
     whole = np.take_along_axis(padded, dot[:, None] + np.arange(_JD_INT_DIGITS), axis=1)
     fraction = np.take_along_axis(padded, (dot + _JD_INT_DIGITS + 1)[:, None] + np.arange(_JD_FRAC_DIGITS), axis=1)
     ok &= fraction[:, 0] != 0  # a digit after the point

@@ -6,12 +6,13 @@ column widths), used by the sample generator and the benchmarks.
 shortest repr of a float64 JD; magnitudes to 0.001, flux to 1e-4); a pass whose stamps the reader would shift (before 2023-02 or a ``Time_format`` saying
 ``start``) is written with the shift undone, so the round trip also returns its times.
 """
+
 from __future__ import annotations
 
+from collections.abc import Sequence
 import json
 import os
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 
@@ -25,22 +26,34 @@ __all__ = ["write_ccd_phot", "write_phc", "CCD_PHOT_VARIANTS"]
 CCD_PHOT_VARIANTS = ("ut", "jd")
 
 # ccd_phot's column lines and row formats (sat_phot.py and res_time2jd.py), column for column.
-_UT_COLUMN_LINE = ("#  Date       UT              X          Y         Xerr      Yerr             Flux     "
-                   "Flux_err     mag{band}  mag_err     Az(deg)   El(deg)   Rg({unit})    filename")
-_JD_COLUMN_LINE = ("#      JD                     X          Y         Xerr      Yerr             Flux     "
-                   "Flux_err     mag{band}  mag_err     Az(deg)   El(deg)   Rg({unit})    filename")
+_UT_COLUMN_LINE = (
+    "#  Date       UT              X          Y         Xerr      Yerr             Flux     "
+    "Flux_err     mag{band}  mag_err     Az(deg)   El(deg)   Rg({unit})    filename"
+)
+_JD_COLUMN_LINE = (
+    "#      JD                     X          Y         Xerr      Yerr             Flux     "
+    "Flux_err     mag{band}  mag_err     Az(deg)   El(deg)   Rg({unit})    filename"
+)
 _UT_ROW = "%s %s    %8.5f  %8.5f  %8.5f  %8.5f     %13.4f  %8.4f   %6.3f  %6.3f    %8.3f %8.3f   %8.3f   %s"
 _JD_ROW = "%-18s        %10.5f %10.5f  %8.5f  %8.5f     %13.4f  %8.4f   %6.3f  %6.3f    %8.3f %8.3f   %8.3f   %s"
 # The phc writer (phc.pyw): time of day, counts, magnitudes, Az, El, Rg.
-_PHC_COLUMN_LINE = ("  UT TIME           ImpB-fon     ImpV-fon         FonB       FonV         mB      mV     "
-                    "Az(deg)  El(deg)  Rg(Mm)")
+_PHC_COLUMN_LINE = (
+    "  UT TIME           ImpB-fon     ImpV-fon         FonB       FonV         mB      mV     Az(deg)  El(deg)  Rg(Mm)"
+)
 _PHC_ROW = "%s%14.3f%12.3f%14.3f%12.3f%10.3f%8.3f    %.3f%8.3f%10.3f"
 _PHC_SENTINEL = SENTINEL_MAGS[0]
 
 
-def write_ccd_phot(pass_: Pass, path: str | Path, variant: str = "ut", *, range_unit: str = "Km",
-                   time_format: str | None = None, frame_names: Sequence[str] | None = None,
-                   centroids_px: np.ndarray | None = None) -> Path:
+def write_ccd_phot(
+    pass_: Pass,
+    path: str | Path,
+    variant: str = "ut",
+    *,
+    range_unit: str = "Km",
+    time_format: str | None = None,
+    frame_names: Sequence[str] | None = None,
+    centroids_px: np.ndarray | None = None,
+) -> Path:
     """Write one pass as a ccd_phot ``.phX`` file.
 
     Parameters
@@ -76,8 +89,10 @@ def write_ccd_phot(pass_: Pass, path: str | Path, variant: str = "ut", *, range_
     if frame_names is not None and len(frame_names) != n:
         raise ValueError(f"frame_names has {len(frame_names)} names for {n} samples")
     if not np.all(np.isfinite(pass_.mag)):
-        raise ValueError("ccd_phot files cannot hold missing magnitudes; drop the invalid samples first "
-                         "(pass_.replace(...) with the valid rows)")
+        raise ValueError(
+            "ccd_phot files cannot hold missing magnitudes; drop the invalid samples first "
+            "(pass_.replace(...) with the valid rows)"
+        )
     if not np.all(pass_.flux > 0):
         raise ValueError("ccd_phot files hold only positive fluxes; drop the samples whose flux is not positive")
 
@@ -101,9 +116,16 @@ def write_ccd_phot(pass_: Pass, path: str | Path, variant: str = "ut", *, range_
     centroids_px = np.asarray(centroids_px, dtype=float)
     if centroids_px.shape != (n, 4):
         raise ValueError(f"centroids_px has shape {centroids_px.shape}; give ({n}, 4) columns X, Y, Xerr, Yerr")
-    numeric = [*centroids_px.T.tolist(), pass_.flux.tolist(), _finite_or_zero(pass_.flux_err),
-               pass_.mag.tolist(), _finite_or_zero(pass_.mag_err), pass_.az_deg.tolist(), pass_.el_deg.tolist(),
-               pass_.range_km.tolist()]
+    numeric = [
+        *centroids_px.T.tolist(),
+        pass_.flux.tolist(),
+        _finite_or_zero(pass_.flux_err),
+        pass_.mag.tolist(),
+        _finite_or_zero(pass_.mag_err),
+        pass_.az_deg.tolist(),
+        pass_.el_deg.tolist(),
+        pass_.range_km.tolist(),
+    ]
     if variant == "ut":
         dates, times = format_date_time_ms(stamps)
         rows = map(_UT_ROW.__mod__, zip(dates, times, *numeric, names))
@@ -113,8 +135,9 @@ def write_ccd_phot(pass_: Pass, path: str | Path, variant: str = "ut", *, range_
     return Path(path)
 
 
-def write_phc(pass_b: Pass, pass_v: Pass, path: str | Path, *, sky_b: np.ndarray | None = None,
-              sky_v: np.ndarray | None = None) -> Path:
+def write_phc(
+    pass_b: Pass, pass_v: Pass, path: str | Path, *, sky_b: np.ndarray | None = None, sky_v: np.ndarray | None = None
+) -> Path:
     """Write two passes (B and V on one time axis) as a photometer ``.phc`` file.
 
     Parameters
@@ -144,8 +167,11 @@ def write_phc(pass_b: Pass, pass_v: Pass, path: str | Path, *, sky_b: np.ndarray
         raise ValueError("the B and V passes must share one time axis (the phc file has one UT column)")
     if pass_b.norad != pass_v.norad or pass_b.exposure_s != pass_v.exposure_s:
         raise ValueError("the B and V passes must be of the same object with the same exposure")
-    for name, a, b in (("az_deg", pass_b.az_deg, pass_v.az_deg), ("el_deg", pass_b.el_deg, pass_v.el_deg),
-                       ("range_km", pass_b.range_km, pass_v.range_km)):
+    for name, a, b in (
+        ("az_deg", pass_b.az_deg, pass_v.az_deg),
+        ("el_deg", pass_b.el_deg, pass_v.el_deg),
+        ("range_km", pass_b.range_km, pass_v.range_km),
+    ):
         if not np.allclose(a, b, rtol=0, atol=1e-9):
             raise ValueError(f"the B and V passes differ in {name}; the phc file has one {name} column")
     exposure_s = pass_b.exposure_s
@@ -179,8 +205,21 @@ def write_phc(pass_b: Pass, pass_v: Pass, path: str | Path, *, sky_b: np.ndarray
         mag = np.where(pass_.valid & np.isfinite(pass_.mag), pass_.mag, _PHC_SENTINEL)
         columns.append((pass_.flux.tolist(), np.maximum(sky, 0.0).tolist(), mag.tolist()))
     (flux_b, sky_b, mag_b), (flux_v, sky_v, mag_v) = columns
-    rows = map(_PHC_ROW.__mod__, zip(clock, flux_b, flux_v, sky_b, sky_v, mag_b, mag_v,
-                                     pass_b.az_deg.tolist(), pass_b.el_deg.tolist(), pass_b.range_km.tolist()))
+    rows = map(
+        _PHC_ROW.__mod__,
+        zip(
+            clock,
+            flux_b,
+            flux_v,
+            sky_b,
+            sky_v,
+            mag_b,
+            mag_v,
+            pass_b.az_deg.tolist(),
+            pass_b.el_deg.tolist(),
+            pass_b.range_km.tolist(),
+        ),
+    )
     _write_atomically(path, "\n".join(lines) + "\n" + "\n".join(rows) + "\n")
     return Path(path)
 
@@ -193,8 +232,12 @@ def _ccd_phot_header(pass_: Pass, stamps: np.ndarray, time_format: str | None) -
     elif pass_.tle is not None:
         lines.append("# TLE:")
         lines.extend(f"# {line}" for line in pass_.tle)
-    lines += [f"# {format_iso_us(stamps[0])}", f"# {format_iso_us(stamps[-1])}", f"# dt = {pass_.exposure_s!r}",
-              f"# Filter = {pass_.band}"]
+    lines += [
+        f"# {format_iso_us(stamps[0])}",
+        f"# {format_iso_us(stamps[-1])}",
+        f"# dt = {pass_.exposure_s!r}",
+        f"# Filter = {pass_.band}",
+    ]
     if time_format is not None:
         lines.append(f"# Time_format = {time_format}")
     site = pass_.site

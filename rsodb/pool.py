@@ -5,12 +5,15 @@ and with one BLAS/OpenMP thread each: the period search works on small matrices,
 second BLAS thread per process only adds contention on a machine whose cores the processes
 already fill.
 """
+
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 import multiprocessing
 import os
-from typing import Callable, Iterable, Iterator
+
+from tqdm.auto import tqdm
 
 __all__ = ["imap_in_pool", "default_processes", "SINGLE_THREAD_ENV"]
 
@@ -40,8 +43,16 @@ def _environment(values: dict) -> Iterator[None]:
                 os.environ[key] = value
 
 
-def imap_in_pool(function: Callable, items: Iterable, *, processes: int | None = None, progress: bool = True,
-                 description: str = "", ordered: bool = False, chunksize: int | None = None) -> Iterator:
+def imap_in_pool(
+    function: Callable,
+    items: Iterable,
+    *,
+    processes: int | None = None,
+    progress: bool = True,
+    description: str = "",
+    ordered: bool = False,
+    chunksize: int | None = None,
+) -> Iterator:
     """Yield ``function(item)`` for every item, computed in worker processes.
 
     Parameters
@@ -66,8 +77,6 @@ def imap_in_pool(function: Callable, items: Iterable, *, processes: int | None =
     object
         The results.
     """
-    from tqdm.auto import tqdm
-
     items = list(items)
     processes = default_processes() if processes is None else int(processes)
     if processes < 1:

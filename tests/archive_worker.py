@@ -16,14 +16,15 @@
 Every line is flushed at once, so a test that SIGKILLs this process knows exactly which
 commits had completed.
 """
+
 from __future__ import annotations
 
 import argparse
 import hashlib
 import json
+from pathlib import Path
 import sys
 import time
-from pathlib import Path
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(PROJECT_ROOT))
@@ -53,15 +54,22 @@ def run_ingest(args) -> int:
     archive.commit = announced_commit  # only this process's instance; the library is unchanged
 
     def on_commit(event: CommitEvent) -> None:
-        say(json.dumps({"commit": event.norad,
-                        "files": [[item.path, list(item.pass_ids)] for item in event.ingested],
-                        "present": list(event.already_present)}))
+        say(
+            json.dumps(
+                {
+                    "commit": event.norad,
+                    "files": [[item.path, list(item.pass_ids)] for item in event.ingested],
+                    "present": list(event.already_present),
+                }
+            )
+        )
 
     say("START")
     while args.start_after and not Path(args.start_after).exists():
         time.sleep(0.005)
-    report = archive.ingest(args.paths, progress=False, workers=args.workers, on_commit=on_commit,
-                            commit_interval_s=args.interval)
+    report = archive.ingest(
+        args.paths, progress=False, workers=args.workers, on_commit=on_commit, commit_interval_s=args.interval
+    )
     say("DONE " + json.dumps(report.to_dict()))
     return 0
 

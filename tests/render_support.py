@@ -1,4 +1,5 @@
 """Helpers shared by the renderer tests: direction pairs and a minimal BodyGeometry."""
+
 from __future__ import annotations
 
 from types import SimpleNamespace
@@ -32,9 +33,14 @@ def geometry(sun, obs, sunlit=None, range_km=1000.0):
         sun, obs = sun[:, None, :], obs[:, None, :]
     n, k = sun.shape[:2]
     phase = np.degrees(np.arccos(np.clip(np.einsum("nj,nj->n", sun[:, 0], obs[:, 0]), -1, 1)))
-    return SimpleNamespace(sun_body=sun, obs_body=obs, weights=np.full(k, 1.0 / k),
-                           sunlit=np.ones((n, k)) if sunlit is None else np.asarray(sunlit, dtype=float),
-                           range_km=np.full(n, range_km), phase_angle_deg=phase)
+    return SimpleNamespace(
+        sun_body=sun,
+        obs_body=obs,
+        weights=np.full(k, 1.0 / k),
+        sunlit=np.ones((n, k)) if sunlit is None else np.asarray(sunlit, dtype=float),
+        range_km=np.full(n, range_km),
+        phase_angle_deg=phase,
+    )
 
 
 def topex_pass_geometry(attitude, frames=slice(None), exposure_s=None):
@@ -43,8 +49,8 @@ def topex_pass_geometry(attitude, frames=slice(None), exposure_s=None):
     ``frames`` selects observed rows; ``exposure_s=0`` turns exposure integration off.
     """
     import ingest
-    from raycast.geometry import PassGeometry
-    from raycast.orbit import Satellite
+    from raycast.geometry.orbit import Satellite
+    from raycast.geometry.pass_geometry import PassGeometry
     from tests.conftest import TOPEX_PHV
 
     observed = ingest.read_file(TOPEX_PHV)[0]

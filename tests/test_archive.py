@@ -3,13 +3,13 @@
 Every comparison of stored arrays is exact: HDF5 stores float64 and int64 bit for bit, so any
 difference is a bug, not rounding.
 """
+
 from __future__ import annotations
 
 import json
 import os
 import re
 import shutil
-from pathlib import Path
 
 import h5py
 import numpy as np
@@ -17,10 +17,9 @@ import pytest
 
 import ingest
 from ingest.observation import ARRAY_FIELDS
-from rsodb.archive import Archive, StoredPass, UnknownPassError
-from rsodb.archive import layout
+from rsodb.archive import Archive, StoredPass, UnknownPassError, layout
 from rsodb.archive.locking import ObjectLock
-from rsodb.archive.synthetic import synthetic_pass
+from rsodb.samples.synthetic import synthetic_pass
 from tests.conftest import COSMOS2540_PHV, COSMOS2553_PHC, PROJECT_ROOT, REAL_FILES, TOPEX_PHV
 
 
@@ -32,8 +31,21 @@ def assert_same_pass(stored, original) -> None:
         assert stored.mag_corrected is None
     else:
         np.testing.assert_array_equal(stored.mag_corrected, original.mag_corrected)
-    for name in ("norad", "name", "band", "site", "exposure_s", "cospar", "tle", "time_convention",
-                 "time_shift_s", "mag_convention", "source_name", "source_sha256", "source_format"):
+    for name in (
+        "norad",
+        "name",
+        "band",
+        "site",
+        "exposure_s",
+        "cospar",
+        "tle",
+        "time_convention",
+        "time_shift_s",
+        "mag_convention",
+        "source_name",
+        "source_sha256",
+        "source_format",
+    ):
         assert getattr(stored, name) == getattr(original, name), name
     assert (stored.omm is None) == (original.omm is None)
     if original.reduction is None:
@@ -240,12 +252,14 @@ def test_batched_results_make_one_commit_per_object(real_archive):
     v, b = "51511-20250130T171941-V-uzhhorod", "51511-20250130T171941-B-uzhhorod"
     topex = "22076-20240730T212240-V-derenivka"
     before = {norad: real_archive.object_path(norad).stat().st_mtime_ns for norad in (22076, 44517, 51511)}
-    commits = real_archive.store_results([
-        (v, "periods", "default", Periods(4.93, [1.0])),
-        (b, "periods", "default", Periods(4.926, [2.0])),
-        (topex, "periods", "default", Periods(9.48, [3.0])),
-        (v, "periods", "default", Periods(4.9299, [4.0])),   # later items replace earlier ones
-    ])
+    commits = real_archive.store_results(
+        [
+            (v, "periods", "default", Periods(4.93, [1.0])),
+            (b, "periods", "default", Periods(4.926, [2.0])),
+            (topex, "periods", "default", Periods(9.48, [3.0])),
+            (v, "periods", "default", Periods(4.9299, [4.0])),  # later items replace earlier ones
+        ]
+    )
     assert commits == 2
     after = {norad: real_archive.object_path(norad).stat().st_mtime_ns for norad in (22076, 44517, 51511)}
     assert after[44517] == before[44517] and after[22076] != before[22076] and after[51511] != before[51511]
@@ -255,7 +269,9 @@ def test_batched_results_make_one_commit_per_object(real_archive):
 
     # A bad item anywhere in the batch is refused before anything is written.
     with pytest.raises(ValueError, match=r"result kind 'period' is not one of periods, fits"):
-        real_archive.store_results([(topex, "periods", "second", Periods(1.0, [1])), (v, "period", "x", Periods(1.0, [1]))])
+        real_archive.store_results(
+            [(topex, "periods", "second", Periods(1.0, [1])), (v, "period", "x", Periods(1.0, [1]))]
+        )
     assert real_archive.result_names(topex, "periods") == ["default"]
 
 
@@ -328,8 +344,10 @@ def test_stale_temp_files_are_removed_unless_their_writer_is_alive(real_archive)
 
 def test_add_in_memory_passes(tmp_path):
     rng = np.random.default_rng(7)
-    made = [synthetic_pass(90001, np.datetime64("2025-03-01T18:00:00", "ns"), 300, rng),
-            synthetic_pass(90002, np.datetime64("2025-03-01T19:00:00", "ns"), 300, rng)]
+    made = [
+        synthetic_pass(90001, np.datetime64("2025-03-01T18:00:00", "ns"), 300, rng),
+        synthetic_pass(90002, np.datetime64("2025-03-01T19:00:00", "ns"), 300, rng),
+    ]
     archive = Archive(tmp_path / "archive")
     report = archive.add(made)
     assert len(report.pass_ids) == 2

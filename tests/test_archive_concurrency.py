@@ -4,6 +4,7 @@ Neither ingest may lose the other's passes, a file both ingest is stored once, a
 which rereads the whole archive in a loop while they run, must only ever see complete passes
 equal to their source files.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -15,7 +16,7 @@ import pytest
 import ingest
 from ingest.observation import ARRAY_FIELDS
 from rsodb.archive import Archive
-from rsodb.archive.synthetic import write_synthetic_corpus
+from rsodb.samples.synthetic import write_synthetic_corpus
 from tests.test_archive_crash import Worker
 
 
@@ -41,8 +42,9 @@ def test_two_ingests_and_a_reader_at_once(tmp_path):
     stop.touch()  # the reader makes one more round, over the final state
     assert reader.finish() == 0, "\n".join(line for line in reader.lines if line.startswith("ERROR"))
 
-    reports = [json.loads(next(line for line in worker.lines if line.startswith("DONE"))[5:])
-               for worker in (first, second)]
+    reports = [
+        json.loads(next(line for line in worker.lines if line.startswith("DONE"))[5:]) for worker in (first, second)
+    ]
     ingested = [item["path"] for report in reports for item in report["ingested"]]
     present = [path for report in reports for path in report["already_present"]]
     # Each of the 40 shared files was stored by exactly one of the two ingests.

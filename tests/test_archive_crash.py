@@ -4,18 +4,19 @@ After every kill the archive must open, hold no temporary files, hold every pass
 reported committed, and every stored pass must equal a fresh read of its source file, array for
 array; no file may be stored twice. Finally an uninterrupted run completes the archive.
 """
+
 from __future__ import annotations
 
 import hashlib
 import json
 import os
+from pathlib import Path
 import shutil
 import signal
 import subprocess
 import sys
 import threading
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,7 +24,7 @@ import pytest
 import ingest
 from ingest.observation import ARRAY_FIELDS
 from rsodb.archive import Archive
-from rsodb.archive.synthetic import write_synthetic_corpus
+from rsodb.samples.synthetic import write_synthetic_corpus
 
 WORKER = Path(__file__).with_name("archive_worker.py")
 N_KILLS = 20
@@ -34,8 +35,13 @@ class Worker:
     """An ingest subprocess in its own process group, its stdout collected by a thread."""
 
     def __init__(self, *args: str):
-        self.process = subprocess.Popen([sys.executable, str(WORKER), *args], stdout=subprocess.PIPE,
-                                        stderr=subprocess.PIPE, text=True, start_new_session=True)
+        self.process = subprocess.Popen(
+            [sys.executable, str(WORKER), *args],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            start_new_session=True,
+        )
         self.lines: list[str] = []
         self.received_s: list[float] = []  # monotonic time each line arrived
         self.started = threading.Event()
@@ -157,6 +163,8 @@ def test_sigkill_at_random_moments_loses_nothing_committed(corpus, tmp_path):
     assert report["failed"] == []
     committed.update(final.committed())
     assert check_archive(archive, committed, expected) == len(paths) == len(expected)
-    print(f"{kills} kills, {mid_commit} during a commit, {left_temp_files} left a temporary file, "
-          f"{restarts} restart(s) from an empty archive after a run completed; {stored} of {len(paths)} "
-          "passes stored before the final run")
+    print(
+        f"{kills} kills, {mid_commit} during a commit, {left_temp_files} left a temporary file, "
+        f"{restarts} restart(s) from an empty archive after a run completed; {stored} of {len(paths)} "
+        "passes stored before the final run"
+    )

@@ -1,4 +1,5 @@
 """Attitude models: conventions, rotation properties, torque-free dynamics against exact answers."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -7,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from raycast.attitude import ATTITUDE_MODELS, InertialSpin, PrecessingSpin, TorqueFree, build
+from raycast.geometry.attitude import ATTITUDE_MODELS, InertialSpin, PrecessingSpin, TorqueFree, build
 
 RNG = np.random.default_rng(20240730)
 
@@ -17,11 +18,14 @@ def random_lvlh(shape) -> np.ndarray:
     q = RNG.normal(size=shape + (4,))
     q /= np.linalg.norm(q, axis=-1, keepdims=True)
     w, x, y, z = np.moveaxis(q, -1, 0)
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-    ], -2)
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        -2,
+    )
 
 
 def angular_velocity(model, t, lvlh=None, h=1e-4):
@@ -37,8 +41,14 @@ REFERENCE_COLUMN = {"z": 0, "x": 1, "y": 2}  # next axis in cyclic order
 
 # -- rotation properties for every model and axis ---------------------------------------------
 def models():
-    yield PrecessingSpin(period_s=9.86, phase_deg=40.0, precession_period_s=689.0, precession_phase_deg=10.0,
-                         precession_angle_deg=35.0, spin_axis="z")
+    yield PrecessingSpin(
+        period_s=9.86,
+        phase_deg=40.0,
+        precession_period_s=689.0,
+        precession_phase_deg=10.0,
+        precession_angle_deg=35.0,
+        spin_axis="z",
+    )
     yield PrecessingSpin(period_s=-40.5, precession_period_s=1620.0, precession_angle_deg=7.0, spin_axis="x")
     yield InertialSpin(pole_ra_deg=123.0, pole_dec_deg=-41.0, period_s=10.73, phase_deg=200.0, spin_axis="y")
     yield TorqueFree.from_angular_momentum((1.0, 2.0, 2.5), (0.05, 0.3, 0.4), 80.0, 20.0, 5.0)
@@ -49,7 +59,9 @@ def test_orientations_are_rotations_of_the_requested_shape(model):
     t = np.linspace(-0.1, 300.0, 24).reshape(6, 4)
     rotation = model.orientation(t, random_lvlh((6, 4)))
     assert rotation.shape == (6, 4, 3, 3)
-    np.testing.assert_allclose(np.swapaxes(rotation, -1, -2) @ rotation, np.broadcast_to(np.eye(3), rotation.shape), atol=1e-12)
+    np.testing.assert_allclose(
+        np.swapaxes(rotation, -1, -2) @ rotation, np.broadcast_to(np.eye(3), rotation.shape), atol=1e-12
+    )
     np.testing.assert_allclose(np.linalg.det(rotation), 1.0, atol=1e-12)
 
 
@@ -59,7 +71,9 @@ def test_models_are_immutable_and_built_from_the_table():
         model.period_s = 1.0
     assert set(ATTITUDE_MODELS) == {"precessing", "inertial", "torque_free"}
     assert build("inertial", pole_ra_deg=1.0, pole_dec_deg=2.0, period_s=3.0) == InertialSpin(1.0, 2.0, 3.0)
-    with pytest.raises(ValueError, match="unknown attitude model 'spinning'; choose one of precessing, inertial, torque_free"):
+    with pytest.raises(
+        ValueError, match="unknown attitude model 'spinning'; choose one of precessing, inertial, torque_free"
+    ):
         build("spinning")
 
 
@@ -67,8 +81,14 @@ def test_models_are_immutable_and_built_from_the_table():
 @pytest.mark.parametrize("axis", ["x", "y", "z"])
 def test_precessing_spin_axis_lies_on_the_cone_around_nadir(axis):
     theta, phi0, period_pr = 35.0, 10.0, 689.0
-    model = PrecessingSpin(period_s=9.86, phase_deg=40.0, precession_period_s=period_pr,
-                           precession_phase_deg=phi0, precession_angle_deg=theta, spin_axis=axis)
+    model = PrecessingSpin(
+        period_s=9.86,
+        phase_deg=40.0,
+        precession_period_s=period_pr,
+        precession_phase_deg=phi0,
+        precession_angle_deg=theta,
+        spin_axis=axis,
+    )
     t = np.linspace(0.0, 1000.0, 57)
     lvlh = random_lvlh(t.shape)
     rotation = model.orientation(t, lvlh)
@@ -82,14 +102,17 @@ def test_precessing_spin_axis_lies_on_the_cone_around_nadir(axis):
 @pytest.mark.parametrize("axis", ["x", "y", "z"])
 def test_precessing_spin_zero_phase_and_sense(axis):
     theta, phi = math.radians(35.0), math.radians(10.0)
-    model = PrecessingSpin(period_s=9.86, phase_deg=0.0, precession_phase_deg=10.0, precession_angle_deg=35.0,
-                           spin_axis=axis)
+    model = PrecessingSpin(
+        period_s=9.86, phase_deg=0.0, precession_phase_deg=10.0, precession_angle_deg=35.0, spin_axis=axis
+    )
     lvlh = np.eye(3)[None]
     rotation = model.orientation(np.zeros(1), lvlh)[0]
     # psi = 0: the reference axis is Rz(phi) Ry(theta) x = (cos th cos phi, cos th sin phi, -sin th),
     # in the plane of nadir and the spin axis, on the side away from the Earth.
     reference = rotation[:, REFERENCE_COLUMN[axis]]
-    np.testing.assert_allclose(reference, [math.cos(theta) * math.cos(phi), math.cos(theta) * math.sin(phi), -math.sin(theta)], atol=1e-15)
+    np.testing.assert_allclose(
+        reference, [math.cos(theta) * math.cos(phi), math.cos(theta) * math.sin(phi), -math.sin(theta)], atol=1e-15
+    )
     # Positive period: right-handed spin about the spin axis at 2 pi / P (no precession here).
     omega = angular_velocity(model, np.zeros(1), lvlh)[0]
     np.testing.assert_allclose(omega, 2 * math.pi / 9.86 * rotation[:, AXIS_COLUMN[axis]], atol=1e-9)
@@ -105,8 +128,9 @@ def test_precessing_spin_periods_and_precession_sense():
     omega = angular_velocity(precessing, np.array([17.0]), np.eye(3)[None])[0]
     np.testing.assert_allclose(omega, [0.0, 0.0, 2 * math.pi / 600.0], atol=1e-10)
     retrograde = dataclasses.replace(precessing, precession_period_s=-600.0)
-    np.testing.assert_allclose(angular_velocity(retrograde, np.array([17.0]), np.eye(3)[None])[0],
-                               [0.0, 0.0, -2 * math.pi / 600.0], atol=1e-10)
+    np.testing.assert_allclose(
+        angular_velocity(retrograde, np.array([17.0]), np.eye(3)[None])[0], [0.0, 0.0, -2 * math.pi / 600.0], atol=1e-10
+    )
 
 
 def test_precessing_spin_needs_the_local_orbital_frames():
@@ -167,8 +191,11 @@ def test_torque_free_conserves_energy_and_angular_momentum_over_ten_thousand_sec
     assert np.linalg.norm(momentum - momentum[0], axis=1).max() / np.linalg.norm(momentum[0]) < 1e-9
     # from_angular_momentum put the momentum at RA 40, Dec 30.
     ra, dec = math.radians(40.0), math.radians(30.0)
-    np.testing.assert_allclose(momentum[0] / np.linalg.norm(momentum[0]),
-                               [math.cos(dec) * math.cos(ra), math.cos(dec) * math.sin(ra), math.sin(dec)], atol=1e-12)
+    np.testing.assert_allclose(
+        momentum[0] / np.linalg.norm(momentum[0]),
+        [math.cos(dec) * math.cos(ra), math.cos(dec) * math.sin(ra), math.sin(dec)],
+        atol=1e-12,
+    )
     # The triaxial body really tumbles: omega wanders in the body frame.
     assert np.ptp(omega[:, 1]) > 0.1
 

@@ -1,10 +1,11 @@
 """BRDFs: closed forms, reciprocity, energy conservation (white furnace), validation."""
+
 import math
 
 import numpy as np
 import pytest
 
-from raycast.brdf import GGX, Lambertian, Principled, directional_albedo, fresnel_dielectric
+from raycast.renderer.brdf import GGX, Lambertian, Principled, directional_albedo, fresnel_dielectric
 from tests.render_support import unit
 
 RNG = np.random.default_rng(20260730)
@@ -16,8 +17,14 @@ def random_hemisphere(m):
     return v / np.linalg.norm(v, axis=1, keepdims=True)
 
 
-RECIPROCAL = [Lambertian(0.7), GGX(0.6, 0.3), GGX(0.6, 0.3, masking="separable"), GGX(1.0, 0.8),
-              Principled(base_color=0.0, roughness=0.5), Principled(base_color=0.8, metallic=1.0, roughness=0.4)]
+RECIPROCAL = [
+    Lambertian(0.7),
+    GGX(0.6, 0.3),
+    GGX(0.6, 0.3, masking="separable"),
+    GGX(1.0, 0.8),
+    Principled(base_color=0.0, roughness=0.5),
+    Principled(base_color=0.8, metallic=1.0, roughness=0.4),
+]
 
 
 @pytest.mark.parametrize("brdf", RECIPROCAL, ids=repr)
@@ -37,9 +44,18 @@ def test_principled_is_not_reciprocal_like_cycles():
     assert abs(brdf(wi, wo, n)[0] / brdf(wo, wi, n)[0] - 1.0) > 1e-3
 
 
-@pytest.mark.parametrize("brdf", [Lambertian(1.0), GGX(1.0, 0.3), GGX(1.0, 0.6), GGX(1.0, 1.0),
-                                  Principled(1.0, roughness=0.5), Principled(1.0, metallic=1.0, roughness=0.5)],
-                         ids=repr)
+@pytest.mark.parametrize(
+    "brdf",
+    [
+        Lambertian(1.0),
+        GGX(1.0, 0.3),
+        GGX(1.0, 0.6),
+        GGX(1.0, 1.0),
+        Principled(1.0, roughness=0.5),
+        Principled(1.0, metallic=1.0, roughness=0.5),
+    ],
+    ids=repr,
+)
 @pytest.mark.parametrize("cos_o", [1.0, 0.7, 0.3])
 def test_white_furnace(brdf, cos_o):
     # A white surface reflects at most what it receives (the quadrature is good to ~2e-3),
@@ -64,13 +80,13 @@ def test_principled_white_base_conserves_energy():
 def test_ggx_closed_form_at_mirror_geometry(masking):
     # Sun and observer at 30 deg on opposite sides: h = n, D = 1 / (pi alpha^2).
     color, roughness = 0.42, 0.3
-    alpha = roughness ** 2
+    alpha = roughness**2
     t = math.radians(30.0)
     wi = np.array([[math.sin(t), 0.0, math.cos(t)]])
     wo = np.array([[-math.sin(t), 0.0, math.cos(t)]])
-    lam = 0.5 * (math.sqrt(1.0 + alpha ** 2 * math.tan(t) ** 2) - 1.0)
+    lam = 0.5 * (math.sqrt(1.0 + alpha**2 * math.tan(t) ** 2) - 1.0)
     g = 1.0 / (1.0 + 2.0 * lam) if masking == "height-correlated" else 1.0 / (1.0 + lam) ** 2
-    expected = color * (1.0 / (math.pi * alpha ** 2)) * g / (4.0 * math.cos(t) ** 2)
+    expected = color * (1.0 / (math.pi * alpha**2)) * g / (4.0 * math.cos(t) ** 2)
     value = GGX(color, roughness, masking=masking)(wi, wo, np.array([[0.0, 0.0, 1.0]]))[0]
     assert value == pytest.approx(expected, rel=1e-12)
 
@@ -112,15 +128,20 @@ def test_principled_diffuse_weight_from_specular_albedo():
     assert weights[0] > weights[1] > weights[2] > 0.5
 
 
-@pytest.mark.parametrize("make, message", [
-    (lambda: GGX(0.5, 1.5), "roughness=1.5 is outside [0, 1]"),
-    (lambda: GGX(0.5, 0.001), "roughness=0.001 is below 0.01"),
-    (lambda: GGX(0.5, 0.3, masking="smith"), "masking='smith' is unknown"),
-    (lambda: Lambertian(-0.1), "albedo=-0.1 is outside [0, 1]"),
-    (lambda: Principled(0.5, ior=0.9), "ior=0.9 is outside (1, 4)"),
-])
+@pytest.mark.parametrize(
+    "make, message",
+    [
+        (lambda: GGX(0.5, 1.5), "roughness=1.5 is outside [0, 1]"),
+        (lambda: GGX(0.5, 0.001), "roughness=0.001 is below 0.01"),
+        (lambda: GGX(0.5, 0.3, masking="smith"), "masking='smith' is unknown"),
+        (lambda: Lambertian(-0.1), "albedo=-0.1 is outside [0, 1]"),
+        (lambda: Principled(0.5, ior=0.9), "ior=0.9 is outside (1, 4)"),
+    ],
+)
 def test_validation_messages(make, message):
-    with pytest.raises(ValueError, match=message.replace("(", r"\(").replace(")", r"\)").replace("[", r"\[").replace("]", r"\]")):
+    with pytest.raises(
+        ValueError, match=message.replace("(", r"\(").replace(")", r"\)").replace("[", r"\[").replace("]", r"\]")
+    ):
         make()
 
 
@@ -144,4 +165,6 @@ def test_shade_keeps_diffuse_light_below_the_shading_horizon():
     wo = unit(rng.normal(size=(50, 3)) + [0, 0, 1.5])
     for brdf in (lambert, GGX(0.5, 0.3), principled):
         ci, co, cio = (np.einsum("ij,ij->i", a, b) for a, b in ((wi, n), (wo, n), (wi, wo)))
-        np.testing.assert_array_equal(brdf.shade(ci, co, cio)[(ci > 0) & (co > 0)], brdf(wi, wo, n)[(ci > 0) & (co > 0)])
+        np.testing.assert_array_equal(
+            brdf.shade(ci, co, cio)[(ci > 0) & (co > 0)], brdf(wi, wo, n)[(ci > 0) & (co > 0)]
+        )

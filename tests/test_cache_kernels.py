@@ -3,7 +3,7 @@
 import numpy as np
 from scipy import sparse
 
-from raycast import _cache_kernels
+from raycast.renderer import _cache_kernels
 
 
 def _case(seed, n_elements, n_frames, n_directions=40, n_groups=7, density=0.7):
@@ -19,14 +19,15 @@ def _case(seed, n_elements, n_frames, n_directions=40, n_groups=7, density=0.7):
     cols = np.repeat(np.arange(n_elements), 2)
     keep = rng.random(2 * n_elements) < 0.75
     keep[::2] = True
-    area = sparse.csc_matrix((rng.random(int(keep.sum())).astype(np.float32) + 0.1, (rows[keep], cols[keep])),
-                             shape=(n_groups, n_elements))
+    area = sparse.csc_matrix(
+        (rng.random(int(keep.sum())).astype(np.float32) + 0.1, (rows[keep], cols[keep])), shape=(n_groups, n_elements)
+    )
     area.sum_duplicates()
     return bits, sun_nodes, obs_nodes, sun, obs, normals, area
 
 
 def _numpy_reference(bits, sun_nodes, obs_nodes, sun, obs, normals, area):
-    sun_all, sun_any = bits[sun_nodes].all(axis=1), bits[sun_nodes].any(axis=1)   # (m, e)
+    sun_all, sun_any = bits[sun_nodes].all(axis=1), bits[sun_nodes].any(axis=1)  # (m, e)
     obs_all, obs_any = bits[obs_nodes].all(axis=1), bits[obs_nodes].any(axis=1)
     both = sun_all & obs_all
     out = (area @ both.T.astype(np.float64)).T
@@ -41,8 +42,18 @@ def _run(case):
     """(m, g) agreed area and the mixed pairs, from the compiled loop."""
     bits, sun_nodes, obs_nodes, sun, obs, normals, area = case
     out = np.zeros((len(sun), area.shape[0]), dtype=np.float32)
-    pairs = _cache_kernels.agreed_weight(out, _cache_kernels.pack_words(bits), sun_nodes, obs_nodes, sun, obs, normals,
-                                   area.indptr, area.indices, area.data)
+    pairs = _cache_kernels.agreed_weight(
+        out,
+        _cache_kernels.pack_words(bits),
+        sun_nodes,
+        obs_nodes,
+        sun,
+        obs,
+        normals,
+        area.indptr,
+        area.indices,
+        area.data,
+    )
     return (out, *pairs)
 
 
@@ -87,7 +98,7 @@ def test_pairs_add_their_value_times_area_to_each_group():
 
 
 def test_rays_and_open_fractions_follow_the_pairs_needs():
-    origins = np.arange(4 * 2 * 3, dtype=np.float32).reshape(4, 2, 3)   # 4 elements, 2 points each
+    origins = np.arange(4 * 2 * 3, dtype=np.float32).reshape(4, 2, 3)  # 4 elements, 2 points each
     sun = np.array([[1, 0, 0], [0, 1, 0]], dtype=np.float32)
     obs = np.array([[0, 0, 1], [0, -1, 0]], dtype=np.float32)
     need = np.array([1, 2, 3], dtype=np.uint8)
@@ -106,15 +117,17 @@ def test_rays_and_open_fractions_follow_the_pairs_needs():
 def test_class_sums_gate_and_weight_by_the_geometric_normal():
     rng = np.random.default_rng(4)
     n_groups, m, n_classes = 30, 12, 5
-    weight = rng.normal(size=(n_groups, m)).astype(np.float32)   # some negative: counted as zero
+    weight = rng.normal(size=(n_groups, m)).astype(np.float32)  # some negative: counted as zero
     unit = lambda a: (a / np.linalg.norm(a, axis=1, keepdims=True)).astype(np.float32)
     normal_geo, normal_shade = unit(rng.normal(size=(n_groups, 3))), unit(rng.normal(size=(n_groups, 3)))
     group_class = rng.integers(0, n_classes, n_groups).astype(np.int32)
     sun, obs = unit(rng.normal(size=(m, 3))), unit(rng.normal(size=(m, 3)))
-    area, normal = _cache_kernels.class_sums(np.ascontiguousarray(weight.T), normal_geo, normal_shade, group_class, sun, obs, n_classes)
+    area, normal = _cache_kernels.class_sums(
+        np.ascontiguousarray(weight.T), normal_geo, normal_shade, group_class, sun, obs, n_classes
+    )
     cos_o, cos_s = normal_geo @ obs.T, normal_geo @ sun.T
     gated = np.maximum(weight, 0.0) * np.where((cos_o > 0) & (cos_s > 0), cos_o, 0.0)
-    one_hot = np.eye(n_classes)[group_class].T                      # (c, g)
+    one_hot = np.eye(n_classes)[group_class].T  # (c, g)
     np.testing.assert_allclose(area, (one_hot @ gated).T, rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(normal, np.einsum("cg,gm,gk->mck", one_hot, gated, normal_shade), rtol=1e-5, atol=1e-6)
     assert (area > 0).sum() > 5

@@ -1,5 +1,6 @@
 """Campaigns on a Dask LocalCluster: every pass fitted and stored, finished fits skipped on
 rerun, failures reported per pass, and the HTML campaign report."""
+
 from __future__ import annotations
 
 import json
@@ -9,18 +10,26 @@ import pytest
 
 from ingest import read_file
 from rsodb.archive import Archive
-from rsodb.campaign import run_campaign, run_campaigns
+from rsodb.campaign.fit_campaign import run_campaign, run_campaigns
 from rsodb.cli import main
 from rsodb.fit.config import FitConfig
-from rsodb.fit.injection import inject, window
+from rsodb.fit.coverage import inject, window
 from rsodb.fit.runner import FitProblem
 from tests.conftest import TOPEX_PHV
 
-TRUTH = {"spin_period_s": 9.86, "spin_phase_deg": 100.0, "precession_period_s": 700.0,
-         "precession_phase_deg": 180.0, "precession_angle_deg": 35.0}
-FIT = {"name": "camp", "model": {"shape": "ellipsoid", "n_sub": 1},
-       "parameters": {"spin_period_s": {"kind": "uniform", "low": 9.5, "high": 10.2}},
-       "sampler": {"n_walkers": 12, "n_steps": 40, "search_maxiter": 8, "search_popsize": 5, "seed": 1}}
+TRUTH = {
+    "spin_period_s": 9.86,
+    "spin_phase_deg": 100.0,
+    "precession_period_s": 700.0,
+    "precession_phase_deg": 180.0,
+    "precession_angle_deg": 35.0,
+}
+FIT = {
+    "name": "camp",
+    "model": {"shape": "ellipsoid", "n_sub": 1},
+    "parameters": {"spin_period_s": {"kind": "uniform", "low": 9.5, "high": 10.2}},
+    "sampler": {"n_walkers": 12, "n_steps": 40, "search_maxiter": 8, "search_popsize": 5, "seed": 1},
+}
 
 
 @pytest.fixture(scope="module")
@@ -51,8 +60,22 @@ def test_campaign_fits_every_pass_then_skips_them_and_reports(archive, tmp_path,
 
     # The command line: a rerun skips both and writes the report.
     report = tmp_path / "fits.html"
-    status = main(["campaign", "--archive", str(archive.path), "--object", "22076", "--name", "camp",
-                   "--steps", "40", "--report", str(report), "--json"])
+    status = main(
+        [
+            "campaign",
+            "--archive",
+            str(archive.path),
+            "--object",
+            "22076",
+            "--name",
+            "camp",
+            "--steps",
+            "40",
+            "--report",
+            str(report),
+            "--json",
+        ]
+    )
     outcome = json.loads(capsys.readouterr().out)
     assert status == 0 and outcome["fitted"] == [] and len(outcome["skipped"]) == 2
     page = report.read_text()

@@ -1,11 +1,12 @@
 """The archive commands: rsodb ingest, ls, show, export (called through main([...]))."""
+
 from __future__ import annotations
 
 import io
 import json
 import os
-import shutil
 from pathlib import Path
+import shutil
 
 import numpy as np
 import pandas as pd
@@ -66,7 +67,19 @@ def test_ingest_progress_bar_goes_to_stderr(tmp_path, shared_data, capsys):
 def test_ls_table_and_json(archive_dir, capsys):
     assert main(["ls", "--archive", str(archive_dir)]) == 0
     lines = capsys.readouterr().out.splitlines()
-    assert lines[0].split() == ["PASS", "ID", "NORAD", "NAME", "SITE", "BAND", "START", "UTC", "DURATION", "S", "POINTS"]
+    assert lines[0].split() == [
+        "PASS",
+        "ID",
+        "NORAD",
+        "NAME",
+        "SITE",
+        "BAND",
+        "START",
+        "UTC",
+        "DURATION",
+        "S",
+        "POINTS",
+    ]
     assert len(lines) == 6
     topex = next(line for line in lines if line.startswith(TOPEX_ID))
     # duration = last - first mid-exposure time of the real file: 2319 samples at ~0.2 s
@@ -146,8 +159,9 @@ def test_export_eossa_reads_back(archive_dir, tmp_path, monkeypatch, capsys):
         assert np.max(np.abs(jd_ns - topex.time_utc.view("int64"))) < 100_000
         assert table["UTC_Begin_exp"][0] == "2024-07-30T21:22:39.908"  # mid 40.0088 - 0.1 s, ms floor
         np.testing.assert_array_equal(table["Mag_Range_Norm"], topex.mag_corrected)  # sign error fixed
-        np.testing.assert_allclose(table["Mag_Exo_Atm"] - table["Mag_Range_Norm"],
-                                   5 * np.log10(topex.range_km / 1000.0), atol=1e-12)
+        np.testing.assert_allclose(
+            table["Mag_Exo_Atm"] - table["Mag_Range_Norm"], 5 * np.log10(topex.range_km / 1000.0), atol=1e-12
+        )
         np.testing.assert_array_equal(table["Tel_Obj_Range"], topex.range_km * 1000.0)
         np.testing.assert_array_equal(table["Eph_AZ_EL"][:, 1], topex.el_deg)
         assert np.all(table["Met_RA_DE"] == -9999.0)
@@ -183,26 +197,30 @@ def test_eossa_geometry_against_authorities(path, shared_data):
     """
     import datetime
 
-    import astropy.units as u
     from astropy.coordinates import AltAz, EarthLocation, get_body
     from astropy.time import Time
+    import astropy.units as u
     from skyfield.api import EarthSatellite, wgs84
 
-    from raycast import ephemeris
-    from raycast.geometry import PassGeometry
-    from raycast.orbit import Satellite
-    from rsodb.eossa import eossa_hdus
+    from raycast.geometry import ephemeris
+    from raycast.geometry.orbit import Satellite
+    from raycast.geometry.pass_geometry import PassGeometry
+    from rsodb.archive.eossa import eossa_hdus
 
     (observed,) = ingest.read_file(path)
     table = eossa_hdus(observed)[1].data
     ts = ephemeris.timescale()
-    times = ts.from_datetimes([t.replace(tzinfo=datetime.timezone.utc)
-                               for t in observed.time_utc.astype("datetime64[us]").astype(object)])
+    times = ts.from_datetimes(
+        [t.replace(tzinfo=datetime.UTC) for t in observed.time_utc.astype("datetime64[us]").astype(object)]
+    )
     site = wgs84.latlon(observed.site.lat_deg, observed.site.lon_deg, elevation_m=observed.site.elevation_m)
     ra, dec, _ = (EarthSatellite(*observed.tle[-2:], ts=ts) - site).at(times).radec()
-    ra1, dec1, ra2, dec2 = map(np.radians, (table["Eph_RA_DE"][:, 0], table["Eph_RA_DE"][:, 1], ra._degrees, dec.degrees))
-    separation_deg = np.degrees(np.arccos(np.clip(
-        np.sin(dec1) * np.sin(dec2) + np.cos(dec1) * np.cos(dec2) * np.cos(ra1 - ra2), -1.0, 1.0)))
+    ra1, dec1, ra2, dec2 = map(
+        np.radians, (table["Eph_RA_DE"][:, 0], table["Eph_RA_DE"][:, 1], ra._degrees, dec.degrees)
+    )
+    separation_deg = np.degrees(
+        np.arccos(np.clip(np.sin(dec1) * np.sin(dec2) + np.cos(dec1) * np.cos(dec2) * np.cos(ra1 - ra2), -1.0, 1.0))
+    )
     assert separation_deg.max() < 0.01
 
     geometry = PassGeometry.compute(Satellite.from_tle(observed.tle), observed.site, observed.time_utc)
@@ -211,8 +229,9 @@ def test_eossa_geometry_against_authorities(path, shared_data):
     # The Sun from astropy's own ephemeris and Earth rotation, an implementation independent of
     # skyfield: they agree to 1e-4 deg; 1e-3 deg allows for astropy's bundled IERS tables.
     every_100th = slice(None, None, 100)
-    location = EarthLocation.from_geodetic(observed.site.lon_deg * u.deg, observed.site.lat_deg * u.deg,
-                                           observed.site.elevation_m * u.m)
+    location = EarthLocation.from_geodetic(
+        observed.site.lon_deg * u.deg, observed.site.lat_deg * u.deg, observed.site.elevation_m * u.m
+    )
     when = Time(observed.time_utc[every_100th])
     sun = get_body("sun", when, location).transform_to(AltAz(obstime=when, location=location))
     sun_az_el = table["Sun_AZ_EL"][every_100th]
@@ -225,4 +244,5 @@ def test_ingest_of_a_directory_without_observations_says_so(tmp_path, capsys):
     (tmp_path / "frames" / "image_0001.fits").write_bytes(b"SIMPLE  =                    T")
     assert main(["ingest", str(tmp_path / "frames"), "--archive", str(tmp_path / "a"), "--no-progress"]) == 0
     assert capsys.readouterr().out.strip() == (
-        "no observation files found (directories are searched for *.ph<letter> files)")
+        "no observation files found (directories are searched for *.ph<letter> files)"
+    )

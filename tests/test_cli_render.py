@@ -1,4 +1,5 @@
 """``rsodb render``: a stored pass rendered, compared, plotted and shown as frames."""
+
 import json
 
 import pytest
@@ -14,9 +15,32 @@ def test_render_command_json_plot_and_frames(tmp_path, capsys):
     Archive(archive, create=True).ingest([TOPEX_PHV], progress=False)
     pass_id = Archive(archive).passes(norad=22076)[0].pass_id
     plot, frames = tmp_path / "lc.png", tmp_path / "frames"
-    status = main(["render", "--model", "topex", "--pass", pass_id[:12], "--archive", str(archive),
-                   "--period-s", "9.86", "--precession-period-s", "689", "--precession-angle-deg", "35",
-                   "--method", "cached", "--json", "--plot", str(plot), "--frames-png", str(frames), "--frames", "2"])
+    status = main(
+        [
+            "render",
+            "--model",
+            "topex",
+            "--pass",
+            pass_id[:12],
+            "--archive",
+            str(archive),
+            "--period-s",
+            "9.86",
+            "--precession-period-s",
+            "689",
+            "--precession-angle-deg",
+            "35",
+            "--method",
+            "cached",
+            "--json",
+            "--plot",
+            str(plot),
+            "--frames-png",
+            str(frames),
+            "--frames",
+            "2",
+        ]
+    )
     assert status == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["n_frames"] == 2320 and summary["method"] == "cached"
@@ -39,9 +63,36 @@ def test_render_command_for_a_tle_site_and_span(tmp_path, capsys):
     # No archive: TOPEX from the shared TLE list, seen from Derenivka over 60 s of the observed
     # pass of 2024-07-30 (the list also holds older TOPEX sets and another object).
     plot, frames = tmp_path / "span.png", tmp_path / "frames"
-    status = main(["render", "--model", "topex", "--tle", str(TLES), "--norad", "22076", "--site", "derenivka",
-                   "--start", "2024-07-30T21:24:00", "--duration", "60", "--cadence", "0.5", "--period-s", "9.86",
-                   "--method", "cached", "--json", "--plot", str(plot), "--frames-png", str(frames), "--frames", "2"])
+    status = main(
+        [
+            "render",
+            "--model",
+            "topex",
+            "--tle",
+            str(TLES),
+            "--norad",
+            "22076",
+            "--site",
+            "derenivka",
+            "--start",
+            "2024-07-30T21:24:00",
+            "--duration",
+            "60",
+            "--cadence",
+            "0.5",
+            "--period-s",
+            "9.86",
+            "--method",
+            "cached",
+            "--json",
+            "--plot",
+            str(plot),
+            "--frames-png",
+            str(frames),
+            "--frames",
+            "2",
+        ]
+    )
     assert status == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["n_frames"] == 121 and summary["norad"] == 22076

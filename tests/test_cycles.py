@@ -1,10 +1,11 @@
 """Blender Cycles as the authority: its conventions checked against closed forms, then the paper's model.
 
-Every render here is direct light only, box filter, float output (see raycast/cycles.py). The
+Every render here is direct light only, box filter, float output (see raycast/cycles/runner.py). The
 tolerances come from Cycles' sampling noise measured at the settings used (docs/cycles.md): at
 64 samples/px and 128 px a plate's I/E scatters by 1e-5 .. 1e-4 relative between seeds, a
 sphere's by up to 1e-3 at phase 150 deg.
 """
+
 from __future__ import annotations
 
 import json
@@ -15,7 +16,8 @@ import sys
 import numpy as np
 import pytest
 
-from raycast.cycles import CyclesMesh, CyclesSettings, measure_noise, render_cycles
+from raycast.cycles.runner import CyclesMesh, CyclesSettings, measure_noise, render_cycles
+from raycast.renderer.scene import icosphere
 from tests.conftest import MODELS, PROJECT_ROOT
 
 SUN_ANGLE_DEG = 0.53
@@ -51,7 +53,9 @@ def sun_disk(sun, angle_deg=SUN_ANGLE_DEG, n_radial=16, n_azimuth=32):
     a = unit(np.cross(sun, helper))
     b = np.cross(sun, a)
     offset = np.cos(phi)[None, :, None] * a[:, None, :] + np.sin(phi)[None, :, None] * b[:, None, :]
-    directions = np.cos(r)[None, :, None, None] * sun[:, None, None, :] + np.sin(r)[None, :, None, None] * offset[:, None, :, :]
+    directions = (
+        np.cos(r)[None, :, None, None] * sun[:, None, None, :] + np.sin(r)[None, :, None, None] * offset[:, None, :, :]
+    )
     return directions.reshape(len(sun), -1, 3), np.repeat(weights, n_azimuth) / n_azimuth
 
 
@@ -88,25 +92,6 @@ def lambert_plate_intensity(sun, obs, albedo, normal=(0.0, 0.0, 1.0)):
     return PLATE_AREA_M2 * albedo * cos_i * obs[:, 2] / np.pi
 
 
-def icosphere(subdivisions):
-    """Vertices (V, 3) on the unit sphere and outward-wound triangles (T, 3)."""
-    t = (1 + 5**0.5) / 2
-    vertices = unit([[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t],
-                     [0, -1, -t], [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]])
-    faces = np.array([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4],
-                      [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8],
-                      [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]])
-    for _ in range(subdivisions):
-        edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-        unique_edges, inverse = np.unique(edges, axis=0, return_inverse=True)
-        midpoint = len(vertices) + inverse.reshape(3, -1).T
-        vertices = np.vstack([vertices, unit(vertices[unique_edges].mean(axis=1))])
-        a, b, c = faces.T
-        ab, bc, ca = midpoint.T
-        faces = np.concatenate([np.stack(tri, axis=1) for tri in ((a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca))])
-    return vertices, faces
-
-
 def convex_lambert_facet_sum(vertices, faces, albedo, sun, obs):
     """(m,) exact I/E of a convex Lambert polyhedron: sum of A rho <cos i>_disk cos e / pi over facets."""
     corners = vertices[faces]
@@ -130,7 +115,9 @@ def plate(material, **normals):
 
 # Directions over the upper hemisphere, from near-normal to grazing (cos down to 0.2).
 PLATE_SUN = unit([[0.3, 0.2, 1.0], [0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [1.0, 0.3, 0.6], [1.0, 0.0, 0.3], [0.2, 1.0, 0.3]])
-PLATE_OBS = unit([[-0.2, -0.1, 1.0], [0.05, 0.0, 1.0], [0.0, 1.0, 0.2], [-1.0, -0.2, 0.4], [-1.0, 0.0, 0.3], [0.2, -1.0, 0.25]])
+PLATE_OBS = unit(
+    [[-0.2, -0.1, 1.0], [0.05, 0.0, 1.0], [0.0, 1.0, 0.2], [-1.0, -0.2, 0.4], [-1.0, 0.0, 0.3], [0.2, -1.0, 0.25]]
+)
 PLATE_SETTINGS = CyclesSettings(samples=64, resolution=64, seed=3, noise_passes=2)
 
 
@@ -158,9 +145,14 @@ def test_render_without_bpy_names_the_extra(monkeypatch):
         ({"blender_node": "Glossy BSDF", "color": [0.5, 0.5, 0.5]}, "lacks 'roughness'"),
         ({"blender_node": "Diffuse BSDF", "color": [0.5, 0.5, 0.5], "metallic": 0.0}, "unknown field 'metallic'"),
         ({"blender_node": "Diffuse BSDF", "color": [0.5, 1.5, 0.5]}, "three linear RGB values in [0, 1]"),
-        ({"blender_node": "Glossy BSDF", "color": [0.5] * 3, "roughness": 2}, "roughness=2; give a number in [0.0, 1.0]"),
-        ({"blender_node": "Glossy BSDF", "color": [0.5] * 3, "roughness": 0.3, "distribution": "PHONG"},
-         "distribution='PHONG'; use one of GGX"),
+        (
+            {"blender_node": "Glossy BSDF", "color": [0.5] * 3, "roughness": 2},
+            "roughness=2; give a number in [0.0, 1.0]",
+        ),
+        (
+            {"blender_node": "Glossy BSDF", "color": [0.5] * 3, "roughness": 0.3, "distribution": "PHONG"},
+            "distribution='PHONG'; use one of GGX",
+        ),
     ],
 )
 def test_bad_materials_are_refused(material, message):
@@ -204,11 +196,11 @@ def test_obj_errors_name_file_and_line(tmp_path):
     materials.write_text(json.dumps({"materials": {"grey": {"blender_node": "Diffuse BSDF", "color": [0.5] * 3}}}))
     no_material = tmp_path / "a.obj"
     no_material.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
-    with pytest.raises(ValueError, match=r"a\.obj:4: face before any usemtl"):
+    with pytest.raises(ValueError, match="material 'default' used in .*a.obj has no entry in"):
         CyclesMesh.from_obj(no_material, materials)
     bad_index = tmp_path / "b.obj"
     bad_index.write_text("v 0 0 0\nv 1 0 0\nusemtl grey\nf 1 2 3\n")
-    with pytest.raises(ValueError, match=r"b\.obj:4: vertex index 3 is outside the 2 vertexs"):
+    with pytest.raises(ValueError, match=r"b\.obj:4: vertex index 3 is outside the 2 vertices defined so far"):
         CyclesMesh.from_obj(bad_index, materials)
     unknown = tmp_path / "c.obj"
     unknown.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl shiny\nf 1 2 3\n")
@@ -216,20 +208,23 @@ def test_obj_errors_name_file_and_line(tmp_path):
         CyclesMesh.from_obj(unknown, materials)
 
 
-def test_obj_reader_keeps_smooth_normals_and_fans_polygons(tmp_path):
-    # A quad in a smoothing group with tilted vn, then the same quad flat: 2 + 2 triangles.
+def test_obj_reader_takes_the_files_normals_everywhere_and_splits_polygons_as_blender(tmp_path):
+    # Two quads with tilted vn, the second after "s off", and a pentagon: with vn in the file,
+    # Blender's importer ignores "s" (every face smooth with the file's normals, checked
+    # against bpy), splits quads along 0-2 and ear-clips the pentagon as (4,0,1),(1,2,3),(1,3,4).
     obj = tmp_path / "q.obj"
     obj.write_text(
-        "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvn 0.6 0 0.8\n"
-        "usemtl grey\ns 1\nf 1//1 2//1 3//1 4//1\ns off\nf 1//1 2//1 3//1 4//1\n"
+        "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\nv 0.5 1.5 1\nvn 0.6 0 0.8\n"
+        "usemtl grey\ns 1\nf 1//1 2//1 3//1 4//1\ns off\nf 5//1 6//1 7//1 8//1\nf 5//1 6//1 7//1 9//1 8//1\n"
     )
     materials = tmp_path / "m.json"
     materials.write_text(json.dumps({"materials": {"grey": {"blender_node": "Diffuse BSDF", "color": [0.5] * 3}}}))
     mesh = CyclesMesh.from_obj(obj, materials)
-    np.testing.assert_array_equal(mesh.triangles, [[0, 1, 2], [0, 2, 3], [0, 1, 2], [0, 2, 3]])
-    # vn is given to 1 decimal and unit already; the flat faces take the winding normal exactly.
-    np.testing.assert_allclose(mesh.corner_normals[:2], np.broadcast_to([0.6, 0, 0.8], (2, 3, 3)), atol=1e-12)
-    np.testing.assert_allclose(mesh.corner_normals[2:], np.broadcast_to([0, 0, 1], (2, 3, 3)), atol=1e-12)
+    np.testing.assert_array_equal(
+        mesh.triangles, [[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7], [7, 4, 5], [5, 6, 8], [5, 8, 7]]
+    )
+    # vn is given to 1 decimal and unit already.
+    np.testing.assert_allclose(mesh.corner_normals, np.broadcast_to([0.6, 0, 0.8], (7, 3, 3)), atol=1e-12)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -243,7 +238,9 @@ def test_obj_reader_matches_blenders_importer(model, tmp_path):
     materials = COSMOS_MATERIALS
     if model == "plate_1m":
         materials = tmp_path / "plate.json"
-        materials.write_text(json.dumps({"materials": {"Material": {"blender_node": "Diffuse BSDF", "color": [0.8] * 3}}}))
+        materials.write_text(
+            json.dumps({"materials": {"Material": {"blender_node": "Diffuse BSDF", "color": [0.8] * 3}}})
+        )
     ours = CyclesMesh.from_obj(MODELS / f"{model}.obj", materials)
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -267,7 +264,9 @@ def test_obj_reader_matches_blenders_importer(model, tmp_path):
     blender = canonical(theirs)
     assert mine.shape == blender.shape
     # positions are the same floats; vn are written with 4 decimals, so normals agree to ~1e-4
-    np.testing.assert_allclose(mine[:, [0, 1, 2, 6, 7, 8, 12, 13, 14]], blender[:, [0, 1, 2, 6, 7, 8, 12, 13, 14]], atol=1e-6)
+    np.testing.assert_allclose(
+        mine[:, [0, 1, 2, 6, 7, 8, 12, 13, 14]], blender[:, [0, 1, 2, 6, 7, 8, 12, 13, 14]], atol=1e-6
+    )
     np.testing.assert_allclose(mine, blender, atol=5e-4)
 
 
@@ -278,8 +277,13 @@ def test_obj_reader_matches_blenders_importer(model, tmp_path):
 @pytest.mark.cycles
 def test_lambert_plate_matches_closed_form_per_channel():
     albedo = np.array([0.2, 0.5, 0.8])
-    result = render_cycles(plate({"blender_node": "Diffuse BSDF", "color": albedo.tolist()}), PLATE_SUN, PLATE_OBS,
-                           PLATE_SETTINGS, progress=False)
+    result = render_cycles(
+        plate({"blender_node": "Diffuse BSDF", "color": albedo.tolist()}),
+        PLATE_SUN,
+        PLATE_OBS,
+        PLATE_SETTINGS,
+        progress=False,
+    )
     expected = lambert_plate_intensity(PLATE_SUN, PLATE_OBS, 1.0)[:, None] * albedo
     # 1e-3: the project's plate criterion; the measured noise here is ~1e-5 .. 1e-4 (docs/cycles.md)
     np.testing.assert_allclose(result.intensity_rgb_m2_sr, expected, rtol=1e-3)
@@ -312,13 +316,26 @@ def test_glossy_plate_matches_ggx_with_height_correlated_masking(roughness):
 def test_principled_limits_reduce_to_lambert_and_ggx():
     # metallic 1 with white base colour: Fresnel is 1, leaving the Glossy GGX form;
     # dielectric with specular IOR level 0: no specular lobe, leaving Lambert.
-    metal = {"blender_node": "Principled BSDF", "base_color": [1, 1, 1], "metallic": 1.0, "roughness": 0.4,
-             "specular_ior_level": 0.5}
-    matte = {"blender_node": "Principled BSDF", "base_color": [0.5] * 3, "metallic": 0.0, "roughness": 0.5,
-             "specular_ior_level": 0.0}
-    mesh = CyclesMesh.from_arrays(PLATE_VERTICES + [[x + 3, y, z] for x, y, z in PLATE_VERTICES],
-                                  PLATE_TRIANGLES + [[a + 4, b + 4, c + 4] for a, b, c in PLATE_TRIANGLES],
-                                  [metal, matte], material_index=[0, 0, 1, 1])
+    metal = {
+        "blender_node": "Principled BSDF",
+        "base_color": [1, 1, 1],
+        "metallic": 1.0,
+        "roughness": 0.4,
+        "specular_ior_level": 0.5,
+    }
+    matte = {
+        "blender_node": "Principled BSDF",
+        "base_color": [0.5] * 3,
+        "metallic": 0.0,
+        "roughness": 0.5,
+        "specular_ior_level": 0.0,
+    }
+    mesh = CyclesMesh.from_arrays(
+        PLATE_VERTICES + [[x + 3, y, z] for x, y, z in PLATE_VERTICES],
+        PLATE_TRIANGLES + [[a + 4, b + 4, c + 4] for a, b, c in PLATE_TRIANGLES],
+        [metal, matte],
+        material_index=[0, 0, 1, 1],
+    )
     metal_only = render_cycles(mesh.with_material(metal), PLATE_SUN[:3], PLATE_OBS[:3], PLATE_SETTINGS, progress=False)
     both = render_cycles(mesh, PLATE_SUN[:3], PLATE_OBS[:3], PLATE_SETTINGS, progress=False)
     metal_expected = 2 * glossy_plate_intensity(PLATE_SUN[:3], PLATE_OBS[:3], 1.0, 0.4)
@@ -339,15 +356,21 @@ def test_corner_normals_shade_as_given():
     obs = unit([[-0.2, -0.1, 1.0], [0.0, 1.0, 0.2], [0.2, 0.3, 1.0], [-1.0, 0.0, 0.2], [-1.0, 0.1, 0.25]])
     assert (obs[3:] @ tilted < 0).all() and (obs[:3] @ tilted > 0).all()
     normals = {"vertex_normals": np.tile(tilted, (4, 1))}
-    diffuse = render_cycles(plate({"blender_node": "Diffuse BSDF", "color": [0.5] * 3}, **normals), sun, obs,
-                            PLATE_SETTINGS, progress=False)
+    diffuse = render_cycles(
+        plate({"blender_node": "Diffuse BSDF", "color": [0.5] * 3}, **normals), sun, obs, PLATE_SETTINGS, progress=False
+    )
     expected = lambert_plate_intensity(sun, obs, 0.5, normal=tilted)
     np.testing.assert_allclose(diffuse.intensity_m2_sr, expected, rtol=1e-3)  # plate criterion
     flat = lambert_plate_intensity(sun, obs, 0.5)
     assert np.abs(expected / flat - 1).min() > 0.02  # the test can tell the two apart
 
-    glossy = render_cycles(plate({"blender_node": "Glossy BSDF", "color": [0.5] * 3, "roughness": 0.6}, **normals),
-                           sun[3:], obs[3:], PLATE_SETTINGS, progress=False)
+    glossy = render_cycles(
+        plate({"blender_node": "Glossy BSDF", "color": [0.5] * 3, "roughness": 0.6}, **normals),
+        sun[3:],
+        obs[3:],
+        PLATE_SETTINGS,
+        progress=False,
+    )
     # a BRDF evaluated with the tilted normal is 0 here; Cycles returns about half the Lambert value
     assert (glossy.intensity_m2_sr > 0.3 * expected[3:]).all()
 
@@ -374,15 +397,26 @@ def test_lambert_sphere_matches_facet_sum_and_phase_law():
 @pytest.mark.cycles
 def test_both_runners_give_the_same_floats():
     mesh = plate({"blender_node": "Glossy BSDF", "color": [0.8] * 3, "roughness": 0.3})
-    results = [render_cycles(mesh, PLATE_SUN[:2], PLATE_OBS[:2], CyclesSettings(samples=8, resolution=32, process=process),
-                             progress=False) for process in ("subprocess", "in_process")]
+    results = [
+        render_cycles(
+            mesh,
+            PLATE_SUN[:2],
+            PLATE_OBS[:2],
+            CyclesSettings(samples=8, resolution=32, process=process),
+            progress=False,
+        )
+        for process in ("subprocess", "in_process")
+    ]
     np.testing.assert_array_equal(results[0].intensity_rgb_m2_sr, results[1].intensity_rgb_m2_sr)
     assert results[0].noise_rel is None and results[0].noise_rel_rms is None
     # a different seed is an independent render: same value within noise, not the same floats
-    other = render_cycles(mesh, PLATE_SUN[:2], PLATE_OBS[:2], CyclesSettings(samples=8, resolution=32, seed=1),
-                          progress=False)
+    other = render_cycles(
+        mesh, PLATE_SUN[:2], PLATE_OBS[:2], CyclesSettings(samples=8, resolution=32, seed=1), progress=False
+    )
     assert not np.array_equal(other.intensity_m2_sr, results[0].intensity_m2_sr)
-    np.testing.assert_allclose(other.intensity_m2_sr, results[0].intensity_m2_sr, rtol=1e-2)  # ~1e-3 noise at 8 spp, 32 px
+    np.testing.assert_allclose(
+        other.intensity_m2_sr, results[0].intensity_m2_sr, rtol=1e-2
+    )  # ~1e-3 noise at 8 spp, 32 px
 
 
 # ---------------------------------------------------------------------------------------------
@@ -392,8 +426,15 @@ def test_both_runners_give_the_same_floats():
 @pytest.mark.cycles
 def test_noise_falls_with_samples_and_seeds_average_to_the_closed_form():
     material = {"blender_node": "Glossy BSDF", "color": [0.8] * 3, "roughness": 0.3}
-    study = measure_noise(plate(material), PLATE_SUN[:3], PLATE_OBS[:3], samples=(4, 32), seeds=4,
-                          settings=CyclesSettings(resolution=64), progress=False)
+    study = measure_noise(
+        plate(material),
+        PLATE_SUN[:3],
+        PLATE_OBS[:3],
+        samples=(4, 32),
+        seeds=4,
+        settings=CyclesSettings(resolution=64),
+        progress=False,
+    )
     assert study.intensity_m2_sr.shape == (2, 4, 3)
     # stratified sampling: 8x the samples cuts the scatter by at least sqrt(8) ~ 2.8; ask for 2
     assert study.rel_std_rms[1] < study.rel_std_rms[0] / 2
@@ -432,7 +473,7 @@ def cosmos_directions():
 def test_cosmos_model_reads_with_its_smooth_normals(cosmos):
     assert cosmos.n_triangles == 2184
     assert set(cosmos.material_names) == {"b_cross", "spb_2", "body_2", "spb_2.001", "body_2.001", "body_1"}
-    # the Principled surfaces take the IOR the .mtl records (Ni 1.45), as raycast.materials does
+    # the Principled surfaces take the IOR the .mtl records (Ni 1.45), as raycast.renderer.materials does
     body = cosmos.materials[cosmos.material_names.index("body_1")]
     assert body["blender_node"] == "Principled BSDF" and body["ior"] == 1.45
     # the tube ("s 1") carries vn that differ from its facets; the flat ("s 0") panels and
@@ -442,8 +483,9 @@ def test_cosmos_model_reads_with_its_smooth_normals(cosmos):
     deviation = 1 - np.einsum("tk,tck->tc", facet, cosmos.corner_normals).min(axis=1)
     tube = cosmos.material_index == cosmos.material_names.index("body_1")
     assert (deviation[tube] > 0.01).sum() > 1000
-    flat_parts = np.isin(cosmos.material_index, [cosmos.material_names.index(name)
-                                                 for name in ("b_cross", "spb_2", "spb_2.001")])
+    flat_parts = np.isin(
+        cosmos.material_index, [cosmos.material_names.index(name) for name in ("b_cross", "spb_2", "spb_2.001")]
+    )
     assert deviation[flat_parts].max() < 1e-12
 
 
@@ -474,8 +516,13 @@ def test_cosmos_renders_are_reciprocal_and_use_smooth_normals(cosmos):
     paper = render_cycles(cosmos, sun, obs, settings, progress=False)
     assert np.isfinite(paper.intensity_m2_sr).all() and (paper.intensity_m2_sr > 0).all()
     # rendered in-process, the same seed gives the same floats
-    same = render_cycles(cosmos, sun[:2], obs[:2], CyclesSettings(samples=32, resolution=128, noise_passes=2,
-                                                                  process="in_process"), progress=False)
+    same = render_cycles(
+        cosmos,
+        sun[:2],
+        obs[:2],
+        CyclesSettings(samples=32, resolution=128, noise_passes=2, process="in_process"),
+        progress=False,
+    )
     np.testing.assert_array_equal(same.intensity_rgb_m2_sr, paper.intensity_rgb_m2_sr[:2])
 
 
@@ -490,8 +537,13 @@ def test_degenerate_plate_obj_renders_black(tmp_path):
     sun, obs = PLATE_SUN[:3], PLATE_OBS[:3]
     sun_below = sun * [1, 1, -1]
     obs_below = obs * [1, 1, -1]
-    result = render_cycles(degenerate, np.vstack([sun, sun_below]), np.vstack([obs, obs_below]),
-                           CyclesSettings(samples=16, resolution=64), progress=False)
+    result = render_cycles(
+        degenerate,
+        np.vstack([sun, sun_below]),
+        np.vstack([obs, obs_below]),
+        CyclesSettings(samples=16, resolution=64),
+        progress=False,
+    )
     lit = np.concatenate([lambert_plate_intensity(sun, obs, 0.8)] * 2)
     # "black": below 1% of what the same plate without the twin face reflects
     assert (result.intensity_m2_sr < 0.01 * lit).all()
@@ -504,22 +556,24 @@ def test_degenerate_plate_obj_renders_black(tmp_path):
 def _bus_panel_tank():
     """A 1 x 1 x 2 m box, a 2 x 1 m plate beside it and a smooth 0.8 m x 1.5 m cylinder:
     flat and smooth shading, and shadows of the parts on each other at some of the directions."""
-    from raycast.scene import Part
+    from raycast.renderer.scene import Part
 
     to_xz = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
-    return [Part.box("bus", (1.0, 1.0, 2.0), "skin"),
-            Part.plate("panel", 2.0, 1.0, "skin").transformed(to_xz, (1.8, 0.0, 0.3)),
-            Part.cylinder("tank", 0.4, 1.5, "skin", segments=48).transformed(np.eye(3), (-1.2, 0.0, 0.0))]
+    return [
+        Part.box("bus", (1.0, 1.0, 2.0), "skin"),
+        Part.plate("panel", 2.0, 1.0, "skin").transformed(to_xz, (1.8, 0.0, 0.3)),
+        Part.cylinder("tank", 0.4, 1.5, "skin", segments=48).transformed(np.eye(3), (-1.2, 0.0, 0.0)),
+    ]
 
 
 @pytest.mark.cycles
 @pytest.mark.slow
 @pytest.mark.parametrize("label", ["diffuse", "glossy"])
 def test_direct_renderer_agrees_with_cycles(label):
-    from raycast.brdf import GGX, Lambertian
-    from raycast.geometry import BodyGeometry
-    from raycast.render import render
-    from raycast.scene import Scene
+    from raycast.geometry.pass_geometry import BodyGeometry
+    from raycast.renderer.brdf import GGX, Lambertian
+    from raycast.renderer.methods import render
+    from raycast.renderer.scene import Scene
 
     entry, brdf = {
         "diffuse": ({"blender_node": "Diffuse BSDF", "color": [0.5] * 3}, Lambertian(0.5)),
@@ -528,13 +582,20 @@ def test_direct_renderer_agrees_with_cycles(label):
     scene = Scene.from_parts(_bus_panel_tank(), {"skin": brdf})
     posed = scene.posed()
     n_triangles = len(posed.corners_m)
-    mesh = CyclesMesh.from_arrays(posed.vertices_m, np.arange(3 * n_triangles).reshape(-1, 3), [entry],
-                                  corner_normals=posed.corner_normals)
+    mesh = CyclesMesh.from_arrays(
+        posed.vertices_m, np.arange(3 * n_triangles).reshape(-1, 3), [entry], corner_normals=posed.corner_normals
+    )
     sun = unit([[1.0, 0.4, 0.3], [0.2, 1.0, 0.3], [0.9, -0.3, -0.2], [0.1, -1.0, 0.6]])
     obs = unit([[0.7, 1.0, 0.1], [1.0, 0.5, 0.6], [0.6, 0.5, 0.3], [-0.3, -1.0, 0.2]])
     n = len(sun)
-    geometry = BodyGeometry(sun_body=sun[:, None, :], obs_body=obs[:, None, :], weights=np.ones(1),
-                            sunlit=np.ones((n, 1)), range_km=np.full(n, 1000.0), phase_angle_deg=np.zeros(n))
+    geometry = BodyGeometry(
+        sun_body=sun[:, None, :],
+        obs_body=obs[:, None, :],
+        weights=np.ones(1),
+        sunlit=np.ones((n, 1)),
+        range_km=np.full(n, 1000.0),
+        phase_angle_deg=np.zeros(n),
+    )
     direct = render(scene, geometry, method="direct", pixel_size_m=0.005)
     cycles = render_cycles(mesh, sun, obs, CyclesSettings(samples=64, resolution=128, noise_passes=2), progress=False)
     # 0.005 mag: the project's accuracy target for the direct renderer, whose edge error at

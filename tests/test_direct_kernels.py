@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from raycast import _direct_kernels
+from raycast.renderer import _direct_kernels
 
 
 def _unit(a):
@@ -17,7 +17,9 @@ def test_sunward_hits_turn_normals_to_the_observer_and_keep_those_facing_the_sun
     face_normals = _unit(rng.normal(size=(n_tri, 3)))
     sun, obs = _unit(rng.normal(size=(n_frames, 3))), _unit(rng.normal(size=(n_frames, 3)))
     normals, lit, rays = _direct_kernels.sunward_hits(frames, prim, points, face_normals, sun, obs, 1e-3)
-    turned = face_normals[prim] * np.where(np.einsum("ij,ij->i", face_normals[prim], obs[frames]) < 0, -1.0, 1.0)[:, None]
+    turned = (
+        face_normals[prim] * np.where(np.einsum("ij,ij->i", face_normals[prim], obs[frames]) < 0, -1.0, 1.0)[:, None]
+    )
     np.testing.assert_array_equal(normals, turned)
     expected_lit = np.flatnonzero(np.einsum("ij,ij->i", turned, sun[frames]) > 0.0)
     np.testing.assert_array_equal(lit, expected_lit)
@@ -45,18 +47,26 @@ def test_tile_rays_and_their_hits():
     step_v = np.array([[0.0, 0.2, 0.0]], dtype=np.float32)
     backward = np.array([[0.0, 0.0, -1.0]], dtype=np.float32)
     rays = _direct_kernels.tile_rays(origin, np.array([0]), step_u, step_v, backward, 2)
-    np.testing.assert_allclose(rays[:, :3], [[1.0, 2.0, 3.0], [1.0, 2.2, 3.0], [1.1, 2.0, 3.0], [1.1, 2.2, 3.0]],
-                               rtol=1e-6)
+    np.testing.assert_allclose(
+        rays[:, :3], [[1.0, 2.0, 3.0], [1.0, 2.2, 3.0], [1.1, 2.0, 3.0], [1.1, 2.2, 3.0]], rtol=1e-6
+    )
     t_hit = np.array([np.inf, 2.0, np.inf, 0.5], dtype=np.float32)
-    frames, prim, uv, points = _direct_kernels.ray_hits(rays, t_hit, np.array([7, 8, 9, 10], dtype=np.uint32),
-                                                         np.arange(8, dtype=np.float32).reshape(4, 2), np.array([5]), 4)
+    frames, prim, uv, points = _direct_kernels.ray_hits(
+        rays,
+        t_hit,
+        np.array([7, 8, 9, 10], dtype=np.uint32),
+        np.arange(8, dtype=np.float32).reshape(4, 2),
+        np.array([5]),
+        4,
+    )
     np.testing.assert_array_equal(frames, [5, 5])
     np.testing.assert_array_equal(prim, [8, 10])
     np.testing.assert_array_equal(uv, [[2, 3], [6, 7]])
     np.testing.assert_allclose(points, [[1.0, 2.2, 1.0], [1.1, 2.2, 2.5]], rtol=1e-6)
     # Each ray its own owner (as the adaptive sampler asks): the owners are the hit rays.
-    hit, prim, _, end = _direct_kernels.ray_hits(rays, t_hit, np.array([7, 8, 9, 10], dtype=np.uint32),
-                                                 np.zeros((4, 2), dtype=np.float32), np.arange(4), 1)
+    hit, prim, _, end = _direct_kernels.ray_hits(
+        rays, t_hit, np.array([7, 8, 9, 10], dtype=np.uint32), np.zeros((4, 2), dtype=np.float32), np.arange(4), 1
+    )
     np.testing.assert_array_equal(hit, [1, 3])
     np.testing.assert_array_equal(prim, [8, 10])
     np.testing.assert_allclose(end, points, rtol=1e-6)

@@ -1,5 +1,6 @@
 """Fit configuration (TOML): the documented example parses, defaults, priors, error messages,
 and the `rsodb fit` command on a synthetic archive."""
+
 from __future__ import annotations
 
 import json
@@ -9,22 +10,22 @@ import re
 import numpy as np
 import pytest
 
-import rsodb.fit.config as config_module
 from rsodb.fit.config import FitConfig
 from rsodb.fit.priors import BoundedNormal, Uniform
+from tests.conftest import PROJECT_ROOT
 
 
 class FakePeriods:
     """Stands in for a stored PeriodResult: only `prior` is used."""
 
-    def prior(self, width_frac=0.01, frame="sidereal"):
-        return Uniform(9.86 * (1 - width_frac), 9.86 * (1 + width_frac))
+    def prior_interval_s(self, width_frac=0.01, frame="sidereal"):
+        return 9.86 * (1 - width_frac), 9.86 * (1 + width_frac)
 
 
 def documented_example() -> str:
-    text = config_module.__doc__
-    block = text[text.index("::") + 2:text.index("Parameters not named")]
-    return "\n".join(line[4:] for line in block.splitlines())
+    text = (PROJECT_ROOT / "docs" / "fitting.md").read_text()
+    start = text.index("```toml\n", text.index("<!-- fit-config-example -->")) + len("```toml\n")
+    return text[start : text.index("\n```", start)]
 
 
 def test_the_documented_example_parses_to_what_it_says(tmp_path):
@@ -33,8 +34,14 @@ def test_the_documented_example_parses_to_what_it_says(tmp_path):
     config = FitConfig.from_toml(path)
     assert config.discard == 250 and config.sampler.n_walkers == 20 and config.model.shape == "auto"
     space = config.parameter_space({"panel_pitch_deg": 12.0}, FakePeriods())
-    assert space.names == ("spin_period_s", "spin_phase_deg", "precession_period_s", "precession_phase_deg",
-                           "precession_angle_deg", "jitter_mag")
+    assert space.names == (
+        "spin_period_s",
+        "spin_phase_deg",
+        "precession_period_s",
+        "precession_phase_deg",
+        "precession_angle_deg",
+        "jitter_mag",
+    )
     assert space.fixed == {"panel_pitch_deg": 12.0}
     priors = dict(zip(space.names, (p.prior for p in space.free)))
     assert priors["precession_angle_deg"] == BoundedNormal(35.0, 10.0, 0.0, 90.0)
@@ -46,32 +53,54 @@ def test_defaults_and_overrides():
     config = FitConfig()
     space = config.parameter_space({}, FakePeriods())
     assert len(space.names) == 6 and not space.fixed
-    narrowed = FitConfig.from_dict({"parameters": {"spin_period_s": {"from": "periods", "width": 0.05, "multiple": 2},
-                                                   "jitter_mag": 0.0, "precession_angle_deg": 35.0}})
+    narrowed = FitConfig.from_dict(
+        {
+            "parameters": {
+                "spin_period_s": {"from": "periods", "width": 0.05, "multiple": 2},
+                "jitter_mag": 0.0,
+                "precession_angle_deg": 35.0,
+            }
+        }
+    )
     space = narrowed.parameter_space({}, FakePeriods())
     low, high = space.free[space.names.index("spin_period_s")].prior.bounds
     np.testing.assert_allclose([low, high], [2 * 9.86 * 0.95, 2 * 9.86 * 1.05], rtol=1e-14)
     assert space.fixed == {"jitter_mag": 0.0, "precession_angle_deg": 35.0}
     # normalised likelihood: no jitter parameter by default
-    assert "jitter_mag" not in FitConfig.from_dict({"likelihood": {"kind": "normalised"}}).parameter_space(
-        {}, FakePeriods()).names
+    assert (
+        "jitter_mag"
+        not in FitConfig.from_dict({"likelihood": {"kind": "normalised"}}).parameter_space({}, FakePeriods()).names
+    )
     assert pickle.loads(pickle.dumps(narrowed)).to_dict() == narrowed.to_dict()
     assert config.replace(sampler={"n_steps": 7}).sampler.n_steps == 7 and config.sampler.n_steps == 500
 
 
-@pytest.mark.parametrize("record, message", [
-    ({"modle": {}}, r"fit configuration \[top level\] has unknown keys \['modle'\]"),
-    ({"model": {"shape": "sphere"}}, r"\[model\] shape='sphere' is not auto or one of topex, cosmos2502, box, ellipsoid, lopsided"),
-    ({"model": {"attitude": "wobble"}}, r"\[model\] attitude='wobble' is not one of precessing, inertial, torque_free"),
-    ({"data": {"stride": 0}}, r"\[data\] stride=0 must be a whole number >= 1"),
-    ({"sampler": {"n_walker": 4}}, r"\[sampler\] has unknown keys \['n_walker'\]"),
-    ({"parameters": {"spin_rate": 1.0}}, r"\[parameters\] 'spin_rate' is not a known parameter"),
-    ({"parameters": {"precession_angle_deg": {"kind": "uniform", "low": 0}}},
-     r"prior of precession_angle_deg: uniform needs high"),
-    ({"parameters": {"spin_phase_deg": {"kind": "uniform", "low": 0, "high": 90}}},
-     r"spin_phase_deg wraps every 360 deg but its prior covers \[0, 90\]"),
-    ({"parameters": {"jitter_mag": {"from": "periods"}}}, r"only spin_period_s can take its prior from"),
-])
+@pytest.mark.parametrize(
+    "record, message",
+    [
+        ({"modle": {}}, r"fit configuration \[top level\] has unknown keys \['modle'\]"),
+        (
+            {"model": {"shape": "sphere"}},
+            r"\[model\] shape='sphere' is not auto or one of topex, cosmos2502, box, ellipsoid, lopsided",
+        ),
+        (
+            {"model": {"attitude": "wobble"}},
+            r"\[model\] attitude='wobble' is not one of precessing, inertial, torque_free",
+        ),
+        ({"data": {"stride": 0}}, r"\[data\] stride=0 must be a whole number >= 1"),
+        ({"sampler": {"n_walker": 4}}, r"\[sampler\] has unknown keys \['n_walker'\]"),
+        ({"parameters": {"spin_rate": 1.0}}, r"\[parameters\] 'spin_rate' is not a known parameter"),
+        (
+            {"parameters": {"precession_angle_deg": {"kind": "uniform", "low": 0}}},
+            r"prior of precession_angle_deg: uniform needs high",
+        ),
+        (
+            {"parameters": {"spin_phase_deg": {"kind": "uniform", "low": 0, "high": 90}}},
+            r"spin_phase_deg wraps every 360 deg but its prior covers \[0, 90\]",
+        ),
+        ({"parameters": {"jitter_mag": {"from": "periods"}}}, r"only spin_period_s can take its prior from"),
+    ],
+)
 def test_configuration_errors_name_the_bad_value(record, message):
     with pytest.raises(ValueError, match=message):
         FitConfig.from_dict(record)
@@ -84,8 +113,10 @@ def test_file_errors_and_missing_period(tmp_path):
     bad.write_text("[model\nshape = 1")
     with pytest.raises(ValueError, match=re.escape(f"{bad}: not valid TOML")):
         FitConfig.from_toml(bad)
-    with pytest.raises(ValueError, match="takes its prior from the stored period but the pass has none; run "
-                                         "'rsodb periods' on it first"):
+    with pytest.raises(
+        ValueError,
+        match="takes its prior from the stored period but the pass has none; run 'rsodb periods' on it first",
+    ):
         FitConfig().parameter_space({})
 
 
@@ -93,30 +124,60 @@ def test_fit_command_fits_a_stored_pass_and_prints_json(tmp_path, capsys):
     from ingest import read_file
     from rsodb.archive import Archive
     from rsodb.cli import main
-    from rsodb.fit.injection import inject, window
+    from rsodb.fit.coverage import inject, window
     from rsodb.fit.runner import FitProblem
     from tests.conftest import TOPEX_PHV
 
     template = window(read_file(TOPEX_PHV)[0], 0.0, 20.0, stride=4)
-    record = {"model": {"shape": "ellipsoid", "n_sub": 1},
-              "parameters": {"spin_period_s": {"kind": "uniform", "low": 9.5, "high": 10.2}},
-              "sampler": {"n_walkers": 12, "n_steps": 30, "search_maxiter": 5, "search_popsize": 5}}
+    record = {
+        "model": {"shape": "ellipsoid", "n_sub": 1},
+        "parameters": {"spin_period_s": {"kind": "uniform", "low": 9.5, "high": 10.2}},
+        "sampler": {"n_walkers": 12, "n_steps": 30, "search_maxiter": 5, "search_popsize": 5},
+    }
     model = FitProblem.build(template, FitConfig.from_dict(record)).posterior.model
-    truth = {"spin_period_s": 9.86, "spin_phase_deg": 100.0, "precession_period_s": 700.0,
-             "precession_phase_deg": 180.0, "precession_angle_deg": 35.0}
+    truth = {
+        "spin_period_s": 9.86,
+        "spin_phase_deg": 100.0,
+        "precession_period_s": 700.0,
+        "precession_phase_deg": 180.0,
+        "precession_angle_deg": 35.0,
+    }
     archive = Archive(tmp_path / "archive")
     archive.add([inject(template, model, truth, noise_mag=0.02, rng=np.random.default_rng(1))])
     pass_id = archive.passes()[0].pass_id
     toml = tmp_path / "fit.toml"
-    toml.write_text('[model]\nshape = "ellipsoid"\nn_sub = 1\n[parameters]\n'
-                    'spin_period_s = { kind = "uniform", low = 9.5, high = 10.2 }\n'
-                    '[sampler]\nn_walkers = 12\nsearch_maxiter = 5\nsearch_popsize = 5\n')
-    status = main(["fit", pass_id[:14], "--archive", str(archive.path), "--config", str(toml), "--steps", "30",
-                   "--name", "cli", "--json", "--plots", str(tmp_path / "plots")])
+    toml.write_text(
+        '[model]\nshape = "ellipsoid"\nn_sub = 1\n[parameters]\n'
+        'spin_period_s = { kind = "uniform", low = 9.5, high = 10.2 }\n'
+        "[sampler]\nn_walkers = 12\nsearch_maxiter = 5\nsearch_popsize = 5\n"
+    )
+    status = main(
+        [
+            "fit",
+            pass_id[:14],
+            "--archive",
+            str(archive.path),
+            "--config",
+            str(toml),
+            "--steps",
+            "30",
+            "--name",
+            "cli",
+            "--json",
+            "--plots",
+            str(tmp_path / "plots"),
+        ]
+    )
     out = json.loads(capsys.readouterr().out)
     assert status == 0 and out["pass_id"] == pass_id and out["n_steps"] == 30 and out["name"] == "cli"
-    assert set(out["parameters"]) == {"spin_period_s", "spin_phase_deg", "precession_period_s",
-                                      "precession_phase_deg", "precession_angle_deg", "jitter_mag"}
+    assert set(out["parameters"]) == {
+        "spin_period_s",
+        "spin_phase_deg",
+        "precession_period_s",
+        "precession_phase_deg",
+        "precession_angle_deg",
+        "jitter_mag",
+    }
     assert archive.result_names(pass_id, "fits") == ["cli"]
     assert sorted(out["plots"]) == ["corner", "lightcurve", "trace"]
 

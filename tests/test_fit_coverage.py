@@ -6,6 +6,7 @@ bench/fit_coverage.py; this test keeps the cost under ~2 minutes: the analytic `
 body (no rotational symmetry, so no phase is ambiguous), four free parameters (spin period and
 phase, precession phase and cone angle; precession period fixed), 10 truths.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -13,14 +14,18 @@ import pytest
 
 from ingest import read_file
 from rsodb.fit.config import FitConfig
-from rsodb.fit.injection import coverage_bounds, coverage_study, window
+from rsodb.fit.coverage import coverage_bounds, coverage_study, window
 from tests.conftest import TOPEX_PHV
 
 N_TRUTHS = 10
 CONFIG = {
-    "name": "coverage", "model": {"shape": "lopsided", "n_sub": 1},
-    "parameters": {"spin_period_s": {"kind": "uniform", "low": 9.76, "high": 9.96},
-                   "precession_period_s": 700.0, "jitter_mag": 0.0},
+    "name": "coverage",
+    "model": {"shape": "lopsided", "n_sub": 1},
+    "parameters": {
+        "spin_period_s": {"kind": "uniform", "low": 9.76, "high": 9.96},
+        "precession_period_s": 700.0,
+        "jitter_mag": 0.0,
+    },
     # Walkers start around the search's best point and move with the stretch move. Started from
     # the search's final population instead (init "population", DE moves), walkers sitting in
     # separate local modes accepted ~2% of proposals and stayed where they started.
@@ -31,8 +36,15 @@ CONFIG = {
 @pytest.mark.slow
 def test_68_percent_intervals_hold_the_truth_about_68_percent_of_the_time(tmp_path):
     template = window(read_file(TOPEX_PHV)[0], 0.0, 30.0, stride=4)
-    recoveries = coverage_study(template, FitConfig.from_dict(CONFIG), range(N_TRUTHS), noise_mag=0.02,
-                                chain_dir=tmp_path, processes=2, progress=False)
+    recoveries = coverage_study(
+        template,
+        FitConfig.from_dict(CONFIG),
+        range(N_TRUTHS),
+        noise_mag=0.02,
+        chain_dir=tmp_path,
+        processes=2,
+        progress=False,
+    )
     covered = np.array([list(r.covered.values()) for r in recoveries])
     assert covered.shape == (N_TRUTHS, 4)
     # For a calibrated posterior each of the 40 intervals holds its truth with probability 0.68:

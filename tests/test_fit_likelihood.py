@@ -1,5 +1,6 @@
 """Likelihoods of rsodb.fit against exact answers: scipy's normal density, numerical
 integration over the offset, and the published workflow's min-max normalisation."""
+
 from __future__ import annotations
 
 import math
@@ -36,15 +37,16 @@ def test_marginalised_offset_equals_numerical_integral_over_offset(data, jitter)
     marginal = GaussianLikelihood(obs, err, offset="marginalised")
     fixed = GaussianLikelihood(obs, err, offset="none")
     c_hat = marginal.offset_mag(model, jitter)
-    sigma_c = 1.0 / math.sqrt(np.sum(1.0 / (err ** 2 + jitter ** 2)))
+    sigma_c = 1.0 / math.sqrt(np.sum(1.0 / (err**2 + jitter**2)))
     reference = fixed.log_likelihood(model + c_hat, jitter)
 
     def integrand(c):
         return math.exp(fixed.log_likelihood(model + c, jitter) - reference)
 
     # +-40 sigma of the offset holds all of the Gaussian's mass to far below double precision.
-    value, abserr = integrate.quad(integrand, c_hat - 40 * sigma_c, c_hat + 40 * sigma_c,
-                                   points=[c_hat], epsabs=0, epsrel=1e-12, limit=200)
+    value, abserr = integrate.quad(
+        integrand, c_hat - 40 * sigma_c, c_hat + 40 * sigma_c, points=[c_hat], epsabs=0, epsrel=1e-12, limit=200
+    )
     numerical = reference + math.log(value)
     # quad's relative error ~1e-12 becomes an absolute error ~1e-12 in ln L; 1e-9 leaves margin.
     assert marginal.log_likelihood(model, jitter) == pytest.approx(numerical, abs=1e-9)
@@ -53,7 +55,7 @@ def test_marginalised_offset_equals_numerical_integral_over_offset(data, jitter)
 def test_best_offset_is_the_weighted_mean_residual(data):
     obs, err, model = data
     like = GaussianLikelihood(obs, err)
-    w = 1 / (err ** 2 + 0.1 ** 2)
+    w = 1 / (err**2 + 0.1**2)
     # Closed form; the data were built with a 0.37 mag offset.
     assert like.offset_mag(model, 0.1) == pytest.approx(np.sum(w * (obs - model)) / np.sum(w), rel=1e-13)
     assert like.offset_mag(model, 0.1) == pytest.approx(0.37, abs=0.05)  # ~3 sigma of the mean of 40 points
@@ -82,7 +84,7 @@ def test_normalised_matches_the_published_min_max_comparison():
     like = NormalisedLikelihood(obs, np.ones(4))
     # By hand: brightest = 1. obs -> [1, 0.5, 0, 0.75]; model -> [1, 0, 0.5, 1].
     d = np.array([1, 0.5, 0, 0.75]) - np.array([1, 0, 0.5, 1])
-    assert like.log_likelihood(model) == pytest.approx(-0.5 * np.sum(d ** 2), abs=1e-15)
+    assert like.log_likelihood(model) == pytest.approx(-0.5 * np.sum(d**2), abs=1e-15)
     assert like.offset_mag(model) == 0.0
 
 

@@ -1,5 +1,6 @@
 """The forward model against exact answers: the Lambertian sphere, the direct renderer on a
 box, phase epochs, pickling for the process pool, and parameter sets without a physical body."""
+
 from __future__ import annotations
 
 import math
@@ -9,20 +10,25 @@ import numpy as np
 import pytest
 
 from ingest import read_file
-from rsodb.fit.injection import inject, window
+from rsodb.fit.coverage import inject, window
 from rsodb.fit.likelihood import GaussianLikelihood
 from rsodb.fit.model import ATTITUDES, ConvexFacets, SpinStateModel
 from rsodb.fit.parameters import ParameterSpace
 from rsodb.fit.posterior import Posterior
 from tests.conftest import TOPEX_PHV
 
-TRUTH = {"spin_period_s": 9.86, "spin_phase_deg": 100.0, "precession_period_s": 700.0,
-         "precession_phase_deg": 40.0, "precession_angle_deg": 35.0}
+TRUTH = {
+    "spin_period_s": 9.86,
+    "spin_phase_deg": 100.0,
+    "precession_period_s": 700.0,
+    "precession_phase_deg": 40.0,
+    "precession_angle_deg": 35.0,
+}
 
 
 def lambert_sphere(radius_m, albedo, phase_rad):
     """I/E of a Lambertian sphere (DESIGN.md ground truth)."""
-    return (2 / 3) * radius_m ** 2 * albedo * (np.sin(phase_rad) + (np.pi - phase_rad) * np.cos(phase_rad)) / np.pi
+    return (2 / 3) * radius_m**2 * albedo * (np.sin(phase_rad) + (np.pi - phase_rad) * np.cos(phase_rad)) / np.pi
 
 
 @pytest.fixture(scope="module")
@@ -32,7 +38,7 @@ def topex_window():
 
 @pytest.fixture(scope="module")
 def geometry(topex_window):
-    from raycast.geometry import PassGeometry
+    from raycast.geometry.pass_geometry import PassGeometry
 
     return PassGeometry.from_pass(topex_window, n_sub=3)
 
@@ -49,9 +55,9 @@ def test_faceted_sphere_matches_the_lambert_sphere():
 
 
 def test_box_matches_the_direct_ray_caster():
-    from raycast.brdf import Lambertian
-    from raycast.direct import DirectRenderer
-    from raycast.scene import Part, Scene
+    from raycast.renderer.brdf import Lambertian
+    from raycast.renderer.direct import DirectRenderer
+    from raycast.renderer.scene import Part, Scene
 
     scene = Scene.from_parts([Part.box("body", (1, 2, 3), "paint")], {"paint": Lambertian(0.2)})
     rng = np.random.default_rng(1)
@@ -67,7 +73,7 @@ def test_box_matches_the_direct_ray_caster():
 def test_sphere_pass_magnitudes_follow_the_phase_angle_whatever_the_attitude(geometry):
     sphere = ConvexFacets.ellipsoid((1.5, 1.5, 1.5), subdivisions=4, albedo=0.25)
     model = SpinStateModel(geometry, sphere, "precessing", {"spin_axis": "x"})
-    from raycast.photometry import magnitude
+    from raycast.renderer.photometry import magnitude
 
     expected = magnitude(lambert_sphere(1.5, 0.25, np.radians(geometry.phase_angle_deg)), 1000.0, "V")
     other = dict(TRUTH, spin_period_s=3.1, precession_angle_deg=80.0)
@@ -83,8 +89,11 @@ def test_phases_are_defined_at_the_epoch(geometry):
     at_start = SpinStateModel(geometry, box, "precessing", epoch_s=0.0)
     epoch = at_middle.epoch_s
     assert epoch == pytest.approx(0.5 * (geometry.t_s[0] + geometry.t_s[-1]), abs=1e-12)
-    shifted = dict(TRUTH, spin_phase_deg=TRUTH["spin_phase_deg"] - 360 * epoch / TRUTH["spin_period_s"],
-                   precession_phase_deg=TRUTH["precession_phase_deg"] - 360 * epoch / TRUTH["precession_period_s"])
+    shifted = dict(
+        TRUTH,
+        spin_phase_deg=TRUTH["spin_phase_deg"] - 360 * epoch / TRUTH["spin_period_s"],
+        precession_phase_deg=TRUTH["precession_phase_deg"] - 360 * epoch / TRUTH["precession_period_s"],
+    )
     # The same rotations, reached through a different phase: equal to rounding.
     np.testing.assert_allclose(at_middle.intensity(TRUTH), at_start.intensity(shifted), rtol=1e-9)
 
@@ -98,8 +107,16 @@ def test_model_pickles_without_its_element_set_and_gives_the_same_magnitudes(geo
 
 def test_impossible_bodies_have_zero_posterior(geometry, topex_window):
     model = SpinStateModel(geometry, ConvexFacets.ellipsoid(), "torque_free")
-    truth = {"spin_period_s": 20.0, "spin_phase_deg": 10.0, "pole_ra_deg": 30.0, "pole_dec_deg": 20.0,
-             "inertia_ratio_2": 1.5, "inertia_ratio_3": 2.0, "omega_polar_deg": 30.0, "omega_azimuth_deg": 50.0}
+    truth = {
+        "spin_period_s": 20.0,
+        "spin_phase_deg": 10.0,
+        "pole_ra_deg": 30.0,
+        "pole_dec_deg": 20.0,
+        "inertia_ratio_2": 1.5,
+        "inertia_ratio_3": 2.0,
+        "omega_polar_deg": 30.0,
+        "omega_azimuth_deg": 50.0,
+    }
     assert np.all(np.isfinite(model.magnitudes(truth)))
     impossible = dict(truth, inertia_ratio_3=2.6)  # 2.6 > 1 + 1.5: no rigid body has these moments
     assert np.all(np.isinf(model.magnitudes(impossible)))
@@ -110,9 +127,9 @@ def test_impossible_bodies_have_zero_posterior(geometry, topex_window):
 
 
 def test_material_scalars_rescale_the_scene_exactly():
-    from raycast.brdf import GGX, Lambertian
-    from raycast.direct import DirectRenderer
-    from raycast.scene import Part, Scene
+    from raycast.renderer.brdf import GGX, Lambertian
+    from raycast.renderer.direct import DirectRenderer
+    from raycast.renderer.scene import Part, Scene
     from rsodb.fit.shapes import MaterialScalars
 
     parts = [Part.box("a", (1, 1, 1), "paint"), Part.box("b", (0.5, 0.5, 0.5), "foil", center_m=(1.0, 0, 0))]
@@ -122,8 +139,9 @@ def test_material_scalars_rescale_the_scene_exactly():
     scaled = MaterialScalars(renderer, ("albedo_scale", "roughness"))
     rougher = DirectRenderer(scene.with_brdfs(paint=Lambertian(0.2), foil=GGX(0.25, 0.6)), 0.02)
     # The same rays through the same code with the rescaled BRDFs: equal to rounding.
-    np.testing.assert_allclose(scaled.intensity(sun, obs, albedo_scale=0.5, roughness=0.6),
-                               rougher.intensity(sun, obs), rtol=1e-12)
+    np.testing.assert_allclose(
+        scaled.intensity(sun, obs, albedo_scale=0.5, roughness=0.6), rougher.intensity(sun, obs), rtol=1e-12
+    )
     assert scaled.supports({"albedo_scale": 2.0}) and not scaled.supports({"albedo_scale": 2.6})
 
 
@@ -138,7 +156,9 @@ def test_inject_builds_a_pass_from_the_model(topex_window, geometry):
 
 
 def test_model_validation_messages(geometry):
-    with pytest.raises(ValueError, match="unknown attitude model 'wobble'; use one of precessing, inertial, torque_free"):
+    with pytest.raises(
+        ValueError, match="unknown attitude model 'wobble'; use one of precessing, inertial, torque_free"
+    ):
         SpinStateModel(geometry, ConvexFacets.box(), "wobble")
     with pytest.raises(ValueError, match=r"attitude model 'torque_free' has no settings \['spin_axis'\]"):
         SpinStateModel(geometry, ConvexFacets.box(), "torque_free", {"spin_axis": "z"})

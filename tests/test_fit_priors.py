@@ -1,4 +1,5 @@
 """Priors and parameter spaces of rsodb.fit against scipy's distributions and exact answers."""
+
 from __future__ import annotations
 
 import math
@@ -54,8 +55,11 @@ def test_prior_from_dict_round_trip_and_messages():
 def test_space_wraps_angles_and_merges_fixed_values():
     space = ParameterSpace.from_names(["spin_period_s", "spin_phase_deg"], fixed={"precession_angle_deg": 30.0})
     values = space.values(np.array([10.0, 370.0]))
-    assert values == {"spin_period_s": 10.0, "spin_phase_deg": pytest.approx(10.0, abs=1e-12),
-                      "precession_angle_deg": 30.0}
+    assert values == {
+        "spin_period_s": 10.0,
+        "spin_phase_deg": pytest.approx(10.0, abs=1e-12),
+        "precession_angle_deg": 30.0,
+    }
     # A wrapped angle has prior support everywhere; an ordinary parameter does not.
     assert math.isfinite(space.log_prior(np.array([10.0, -725.0])))
     assert space.log_prior(np.array([-1.0, 10.0])) == -math.inf

@@ -1,6 +1,7 @@
 """A whole fit through the archive: the stored period sets the prior, the chain lives at
 archive.chain_path, the FitResult round-trips through HDF5, plots are written, and a
 misspecified model reports its misfit."""
+
 from __future__ import annotations
 
 from dataclasses import replace
@@ -12,23 +13,35 @@ import pytest
 from ingest import read_file
 from rsodb.archive import Archive
 from rsodb.fit.config import FitConfig
-from rsodb.fit.injection import inject, window
+from rsodb.fit.coverage import inject, window
+from rsodb.fit.priors import Uniform
 from rsodb.fit.result import FitResult
 from rsodb.fit.runner import FitProblem, fit_pass
 from tests.conftest import TOPEX_PHV
 
-TRUTH = {"spin_period_s": 9.86, "spin_phase_deg": 100.0, "precession_period_s": 700.0,
-         "precession_phase_deg": 180.0, "precession_angle_deg": 35.0}
+TRUTH = {
+    "spin_period_s": 9.86,
+    "spin_phase_deg": 100.0,
+    "precession_period_s": 700.0,
+    "precession_phase_deg": 180.0,
+    "precession_angle_deg": 35.0,
+}
 QUICK = {"n_walkers": 14, "n_steps": 120, "search_maxiter": 60, "seed": 2}
 
 
 def synthetic_archive(tmp_path, shape: str, noise_mag: float = 0.02):
     template = window(read_file(TOPEX_PHV)[0], 0.0, 30.0, stride=3)
-    render = FitConfig.from_dict({"model": {"shape": shape, "n_sub": 2},
-                                  "parameters": {"spin_period_s": {"kind": "uniform", "low": 9.0, "high": 11.0}}})
+    render = FitConfig.from_dict(
+        {
+            "model": {"shape": shape, "n_sub": 2},
+            "parameters": {"spin_period_s": {"kind": "uniform", "low": 9.0, "high": 11.0}},
+        }
+    )
     posterior = FitProblem.build(template, render).posterior
     truth = dict(posterior.space.fixed, **TRUTH)  # the shape's articulations at their defaults
-    observed = inject(template, posterior.model, truth, noise_mag=noise_mag, rng=np.random.default_rng(4), offset_mag=0.7)
+    observed = inject(
+        template, posterior.model, truth, noise_mag=noise_mag, rng=np.random.default_rng(4), offset_mag=0.7
+    )
     archive = Archive(tmp_path / "archive")
     archive.add([observed])
     return archive, archive.passes()[0].pass_id
@@ -36,7 +49,7 @@ def synthetic_archive(tmp_path, shape: str, noise_mag: float = 0.02):
 
 @pytest.fixture(scope="module")
 def fitted(tmp_path_factory):
-    from rsodb.periods import analyse_pass
+    from rsodb.periods.analysis import analyse_pass
 
     archive, pass_id = synthetic_archive(tmp_path_factory.mktemp("fit"), "ellipsoid")
     periods = analyse_pass(archive.get(pass_id))
@@ -48,9 +61,14 @@ def fitted(tmp_path_factory):
     # which is what the periodogram measures; "multiple = 2" turns that into the spin prior.
     # The width is 3%, not the default 1%: with a precessing spin axis the light curve's period
     # is not the spin period (see test_spin_period_prior_comes_from_the_stored_period).
-    config = FitConfig.from_dict({"name": "quick", "model": {"shape": "ellipsoid", "n_sub": 2}, "sampler": QUICK,
-                                  "parameters": {"spin_period_s": {"from": "periods", "multiple": 2.0,
-                                                                   "width": 0.03}}})
+    config = FitConfig.from_dict(
+        {
+            "name": "quick",
+            "model": {"shape": "ellipsoid", "n_sub": 2},
+            "sampler": QUICK,
+            "parameters": {"spin_period_s": {"from": "periods", "multiple": 2.0, "width": 0.03}},
+        }
+    )
     return archive, pass_id, periods, fit_pass(archive, pass_id, config, progress=False)
 
 
@@ -70,7 +88,7 @@ def test_fit_is_stored_with_the_chain_in_the_archive(fitted):
 def test_spin_period_prior_comes_from_the_stored_period(fitted):
     archive, pass_id, periods, result = fitted
     prior = result.space.free[result.names.index("spin_period_s")].prior
-    expected = periods.prior(0.03)
+    expected = Uniform(*periods.prior_interval_s(0.03))
     assert (prior.low, prior.high) == pytest.approx((2 * expected.low, 2 * expected.high), rel=1e-12)
     # The light curve repeats near half the spin period, but not at it: the spin axis turns
     # too (precession: cos(theta) / P_pr = 1.2% of 1/P here; the orbit frame and the changing
@@ -121,8 +139,14 @@ def test_plots_are_written(fitted, tmp_path):
 def test_misspecified_model_reports_its_misfit(tmp_path):
     # Data rendered from the detailed TOPEX model (cached renderer), fitted with the ellipsoid.
     archive, pass_id = synthetic_archive(tmp_path, "topex", noise_mag=0.01)
-    config = FitConfig.from_dict({"name": "simple", "model": {"shape": "ellipsoid", "n_sub": 2}, "sampler": QUICK,
-                                  "parameters": {"spin_period_s": {"kind": "uniform", "low": 9.5, "high": 10.2}}})
+    config = FitConfig.from_dict(
+        {
+            "name": "simple",
+            "model": {"shape": "ellipsoid", "n_sub": 2},
+            "sampler": QUICK,
+            "parameters": {"spin_period_s": {"kind": "uniform", "low": 9.5, "high": 10.2}},
+        }
+    )
     result = fit_pass(archive, pass_id, config, progress=False)
     # An ellipsoid cannot make TOPEX's light curve: residuals far above the 0.01 mag noise,
     # the jitter absorbing them, and the result saying so.
@@ -140,16 +164,30 @@ def test_stored_draws_keep_every_walker():
     from rsodb.fit.sampler import ChainRun
 
     template = window(read_file(TOPEX_PHV)[0], 0.0, 20.0, stride=4)
-    config = FitConfig.from_dict({"model": {"shape": "lopsided", "n_sub": 1},
-                                  "parameters": {"spin_period_s": {"kind": "uniform", "low": 9.7, "high": 10.0}}})
+    config = FitConfig.from_dict(
+        {
+            "model": {"shape": "lopsided", "n_sub": 1},
+            "parameters": {"spin_period_s": {"kind": "uniform", "low": 9.7, "high": 10.0}},
+        }
+    )
     posterior = FitProblem.build(template, config).posterior
     rng = np.random.default_rng(3)
     n_steps, n_walkers = 800, 16
     start = posterior.space.sample_prior(rng, 1)[0]
     chain = np.broadcast_to(start, (n_steps, n_walkers, start.size)).copy()
     chain[:, :, 0] = np.where(np.arange(n_walkers) % 2 == 0, 9.80, 9.90)
-    run = ChainRun(posterior.space.names, chain, np.zeros((n_steps, n_walkers)), np.full(n_walkers, 0.3),
-                   np.full(start.size, 10.0), 0, n_steps, 1.0, {}, "")
+    run = ChainRun(
+        posterior.space.names,
+        chain,
+        np.zeros((n_steps, n_walkers)),
+        np.full(n_walkers, 0.3),
+        np.full(start.size, 10.0),
+        0,
+        n_steps,
+        1.0,
+        {},
+        "",
+    )
     result = FitResult.from_run(run, posterior, pass_id="p", name="n", time_utc=template.time_utc)
     periods = result.samples[:, 0]
     assert periods.size <= MAX_STORED_SAMPLES

@@ -1,5 +1,6 @@
 """The emcee wrapper: seeds, process pool, resume after SIGKILL, recovery from a damaged chain
 file, the global search, and posterior widths against the Fisher-matrix answer."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -51,12 +52,14 @@ def make_posterior(delay_s: float = 0.0, period_prior=(9.0, 11.0), n: int = 150,
     err = np.full(n, 0.05)
     mag = model.magnitudes(TRUTH) + 12.3 + err * rng.standard_normal(n)
     space = ParameterSpace.from_names(["spin_period_s", "spin_phase_deg"]).with_prior(
-        "spin_period_s", Uniform(*period_prior))
+        "spin_period_s", Uniform(*period_prior)
+    )
     return Posterior(space, model, GaussianLikelihood(mag, err))
 
 
-SMALL = SamplerSettings(n_walkers=8, n_steps=40, init="search", search_maxiter=10, search_popsize=5, seed=7,
-                        checkpoint_every=10)
+SMALL = SamplerSettings(
+    n_walkers=8, n_steps=40, init="search", search_maxiter=10, search_popsize=5, seed=7, checkpoint_every=10
+)
 
 
 def test_same_seed_gives_the_identical_chain_and_another_seed_does_not(tmp_path):
@@ -96,8 +99,7 @@ def test_resume_refuses_a_chain_from_other_settings(tmp_path):
     run_sampler(posterior, SMALL.replace(n_steps=5), tmp_path / "c.h5", progress=False)
     with pytest.raises(ValueError, match=r"c\.h5 was started with different seed; run again with restart=True"):
         run_sampler(posterior, SMALL.replace(seed=99), tmp_path / "c.h5", progress=False)
-    fresh = run_sampler(posterior, SMALL.replace(seed=99, n_steps=5), tmp_path / "c.h5", progress=False,
-                        restart=True)
+    fresh = run_sampler(posterior, SMALL.replace(seed=99, n_steps=5), tmp_path / "c.h5", progress=False, restart=True)
     assert fresh.resumed_from == 0
 
 
@@ -152,8 +154,7 @@ def test_sigkill_mid_run_then_rerun_continues_where_it_stopped(tmp_path):
 def test_search_start_puts_every_walker_in_the_true_mode_of_a_multimodal_posterior(tmp_path):
     # Over 30 s a period prior of 5-20 s holds many local modes (cycle-count aliases).
     posterior = make_posterior(period_prior=(5.0, 20.0))
-    settings = SamplerSettings(n_walkers=8, n_steps=30, init="search", search_maxiter=40, search_popsize=10,
-                               seed=5)
+    settings = SamplerSettings(n_walkers=8, n_steps=30, init="search", search_maxiter=40, search_popsize=10, seed=5)
     run = run_sampler(posterior, settings, tmp_path / "search.h5", progress=False)
     assert run.init["method"] == "search" and run.init["evaluations"] > 8
     # Neighbouring aliases are ~P^2 / 30 s = 3 s away; the true mode's width is ~0.005 s.
@@ -171,10 +172,14 @@ def test_posterior_widths_match_the_fisher_matrix(tmp_path):
     model = posterior.model
     t = model.t_s
     arg = 2 * np.pi * t / np.median(period) + np.radians(np.median(phase))
-    jac = np.column_stack([model.amplitude_mag * np.sin(arg) * 2 * np.pi * t / np.median(period) ** 2,
-                           -model.amplitude_mag * np.sin(arg) * np.pi / 180])
+    jac = np.column_stack(
+        [
+            model.amplitude_mag * np.sin(arg) * 2 * np.pi * t / np.median(period) ** 2,
+            -model.amplitude_mag * np.sin(arg) * np.pi / 180,
+        ]
+    )
     jac -= jac.mean(axis=0)
-    cov = np.linalg.inv(jac.T @ jac / 0.05 ** 2)
+    cov = np.linalg.inv(jac.T @ jac / 0.05**2)
     expected = np.sqrt(np.diag(cov))
     # 16 walkers x 400 kept steps with autocorrelation ~20 steps give ~300 independent
     # samples: the standard deviation is known to ~1/sqrt(2 * 300) = 4%; 15% is ~4 sigma.
@@ -220,10 +225,10 @@ def test_autocorrelation_time_ignores_walkers_that_never_moved():
     for t in range(1, steps):
         chain[t] = 0.8 * chain[t - 1] + noise[t]
     expected = integrated_time(chain[:, 1:], tol=0)
-    chain[:, 0, 0] = 1.5          # one walker stuck in the first parameter
-    chain[:, :, 1][:, 3] = -2.0   # another stuck in the second
+    chain[:, 0, 0] = 1.5  # one walker stuck in the first parameter
+    chain[:, :, 1][:, 3] = -2.0  # another stuck in the second
     with warnings.catch_warnings():
-        warnings.simplefilter("error")   # emcee alone divides by the stuck walker's zero variance
+        warnings.simplefilter("error")  # emcee alone divides by the stuck walker's zero variance
         tau = autocorr_time(chain)
     assert np.all(np.abs(tau - 9.0) < 2.0)
     np.testing.assert_allclose(tau[0], expected[0], rtol=1e-12)

@@ -4,6 +4,7 @@ nothing already stored changes.
 The bad files are made from a real ccd_phot file (COSMOS 2540) by one edit each, so the line
 each error must point at is known from the edit: data row k (0-based) is file line 17 + k.
 """
+
 from __future__ import annotations
 
 import os
@@ -68,7 +69,7 @@ def _drop_field(k: int) -> str:
 # Columns: 0 date, 1 time, 2-5 centroid, 6 Flux, 7 Flux_err, 8 magV, 9 mag_err, 10 Az, 11 El, 12 Rg.
 CASES = {
     "empty.phV": (b"", None, ["empty"]),
-    "header-only.phV": (lambda: "".join(_lines()[:FIRST_DATA_LINE - 1]), FIRST_DATA_LINE, ["no", "data rows"]),
+    "header-only.phV": (lambda: "".join(_lines()[: FIRST_DATA_LINE - 1]), FIRST_DATA_LINE, ["no", "data rows"]),
     "truncated-mid-row.phV": (lambda: _truncated(99), _row_line(99), ["truncated"]),
     "wrong-column-count.phV": (lambda: _drop_field(9), _row_line(9), ["13 columns", "expected 14"]),
     "non-numeric.phV": (lambda: _edit_field(20, 8, "6.2x3"), _row_line(20), ["magV", "'6.2x3'", "not a number"]),
@@ -79,8 +80,11 @@ CASES = {
     "negative-flux.phV": (lambda: _edit_field(40, 6, "-12.5000"), _row_line(40), ["Flux -12.5000", "not positive"]),
     "zero-flux.phV": (lambda: _edit_field(41, 6, "0.0000"), _row_line(41), ["Flux 0.0000", "not positive"]),
     "utf16.phV": (lambda: COSMOS2540_PHV.read_text().encode("utf-16"), 1, ["UTF-16", "UTF-8"]),
-    "latin1.phV": (lambda: COSMOS2540_PHV.read_text().replace("NAME   = COSMOS 2540", "NAME   = COSMOS 2540 é")
-                   .encode("latin-1"), 11, ["0xe9", "UTF-8"]),
+    "latin1.phV": (
+        lambda: COSMOS2540_PHV.read_text().replace("NAME   = COSMOS 2540", "NAME   = COSMOS 2540 é").encode("latin-1"),
+        11,
+        ["0xe9", "UTF-8"],
+    ),
     "binary-garbage.phV": (lambda: np.random.default_rng(0).bytes(5000), 1, ["binary"]),
     "ten-megabyte-line.phV": (b"x" * (10 * 2**20), 1, ["longer than"]),
 }
@@ -116,7 +120,7 @@ def test_each_bad_file_is_reported_and_nothing_stored_is_lost(stored, tmp_path):
     (corpus / "again.phV").write_bytes(TOPEX_PHV.read_bytes())
     loop = corpus / "loop"
     loop.mkdir()
-    os.symlink("..", loop / "up")   # a symlink loop: loop/up/loop/up/...
+    os.symlink("..", loop / "up")  # a symlink loop: loop/up/loop/up/...
     os.symlink("missing.phV", corpus / "dangling.phV")
 
     report = archive.ingest([corpus], progress=False, workers=2)
@@ -135,8 +139,7 @@ def test_each_bad_file_is_reported_and_nothing_stored_is_lost(stored, tmp_path):
     # The edited photometer file (only its header's start time changed) holds the same two
     # observations as the stored one: new versions of them, B and V.
     assert [item.path for item in report.ingested] == [str(odd)]
-    assert report.ingested[0].pass_ids == ("51511-20250130T171941-B-uzhhorod-v2",
-                                            "51511-20250130T171941-V-uzhhorod-v2")
+    assert report.ingested[0].pass_ids == ("51511-20250130T171941-B-uzhhorod-v2", "51511-20250130T171941-V-uzhhorod-v2")
     assert report.already_present == (str(corpus / "again.phV"),)
     # The files that were stored before are untouched, byte for byte; only the object of the
     # new .phc (51511) gained its two new versions, and its earlier passes are still there.
@@ -154,7 +157,7 @@ def test_cli_reports_file_line_reason_and_exits_1(stored, tmp_path, capsys):
     status = main(["ingest", str(corpus), "--archive", str(archive.path), "--no-progress"])
     out = capsys.readouterr().out
     assert status == 1
-    assert f"0 file(s) (0 pass(es))" in out and f"{len(expected)} failed" in out
+    assert "0 file(s) (0 pass(es))" in out and f"{len(expected)} failed" in out
     for path, (line, _) in expected.items():
         where = f"{path}:{line}: " if line is not None else f"{path}: "
         assert f"\n  {where}" in out

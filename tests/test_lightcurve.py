@@ -1,4 +1,5 @@
 """LightCurve, periodograms and dispersion measures: exact answers and astropy as the authority."""
+
 from __future__ import annotations
 
 import math
@@ -6,15 +7,15 @@ import math
 import matplotlib
 
 matplotlib.use("Agg")
-import numpy as np
-import pytest
 from astropy import units as u
 from astropy.timeseries import LombScargle
+import numpy as np
+import pytest
 
 import ingest
-from rsodb.dispersion import pdm, pdm_bic, pdm_f_test, pdm_within, string_length
-from rsodb.lightcurve import LightCurve
-from rsodb.periodogram import PERIODOGRAM_METHODS, frequency_grid
+from rsodb.periods.dispersion import pdm, pdm_bic, pdm_f_test, pdm_within, string_length
+from rsodb.periods.lightcurve import LightCurve
+from rsodb.periods.power import PERIODOGRAM_METHODS, frequency_grid
 from tests.conftest import TOPEX_PHV
 
 
@@ -26,8 +27,11 @@ def topex_pass():
 def sine_curve(period_s=7.0, n=1500, cadence_s=0.2, noise=0.0, seed=0, amplitude=0.5):
     rng = np.random.default_rng(seed)
     t = np.arange(n) * cadence_s
-    mag = 5.0 + amplitude * np.sin(2 * np.pi * t / period_s) + rng.normal(0, noise, n) if noise else \
-        5.0 + amplitude * np.sin(2 * np.pi * t / period_s)
+    mag = (
+        5.0 + amplitude * np.sin(2 * np.pi * t / period_s) + rng.normal(0, noise, n)
+        if noise
+        else 5.0 + amplitude * np.sin(2 * np.pi * t / period_s)
+    )
     return LightCurve.from_arrays(t, mag, np.full(n, max(noise, 0.01)))
 
 
@@ -61,16 +65,19 @@ def test_arrays_are_read_only_and_operations_return_new_objects():
 def test_from_arrays_accepts_quantities():
     t = np.arange(10) * 0.5
     lc = LightCurve.from_arrays((t / 60) * u.min, np.ones(10), np.full(10, 0.01) * u.mag)
-    np.testing.assert_allclose(lc.t_s, t, rtol=1e-12)   # minutes converted back to seconds
+    np.testing.assert_allclose(lc.t_s, t, rtol=1e-12)  # minutes converted back to seconds
 
 
-@pytest.mark.parametrize("kwargs, message", [
-    ({"t_s": [0, 1, 1], "mag": [1, 2, 3], "mag_err": [0.1] * 3}, "strictly increasing"),
-    ({"t_s": [0, 1, 2], "mag": [1, np.nan, 3], "mag_err": [0.1] * 3}, "non-finite"),
-    ({"t_s": [0, 1, 2], "mag": [1, 2], "mag_err": [0.1] * 3}, "mag has 2 samples but t_s has 3"),
-    ({"t_s": [0, 1, 2], "mag": [1, 2, 3], "mag_err": [0.1, -1, 0.1]}, "negative"),
-    ({"t_s": [0], "mag": [1], "mag_err": [0.1]}, "at least 2 samples"),
-])
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"t_s": [0, 1, 1], "mag": [1, 2, 3], "mag_err": [0.1] * 3}, "strictly increasing"),
+        ({"t_s": [0, 1, 2], "mag": [1, np.nan, 3], "mag_err": [0.1] * 3}, "non-finite"),
+        ({"t_s": [0, 1, 2], "mag": [1, 2], "mag_err": [0.1] * 3}, "mag has 2 samples but t_s has 3"),
+        ({"t_s": [0, 1, 2], "mag": [1, 2, 3], "mag_err": [0.1, -1, 0.1]}, "negative"),
+        ({"t_s": [0], "mag": [1], "mag_err": [0.1]}, "at least 2 samples"),
+    ],
+)
 def test_bad_arrays_are_refused_with_a_clear_message(kwargs, message):
     with pytest.raises(ValueError, match=message):
         LightCurve(**kwargs)
@@ -80,7 +87,7 @@ def test_bad_arrays_are_refused_with_a_clear_message(kwargs, message):
 def test_detrend_removes_a_cubic_exactly_and_accumulates_the_trend():
     t = np.linspace(0, 300, 900)
     x = t / 150 - 1
-    trend = 6 + 0.4 * x - 0.3 * x ** 2 + 0.2 * x ** 3
+    trend = 6 + 0.4 * x - 0.3 * x**2 + 0.2 * x**3
     lc = LightCurve.from_arrays(t, trend, np.full(t.size, 0.02))
     flat = lc.detrend(3)
     # A cubic lies in the span of the degree-3 basis: the residual is rounding only.
@@ -110,7 +117,7 @@ def test_fold_gives_exact_phases_and_cycles():
 
 # -- frequency grid and periodograms -----------------------------------------------------------
 def test_frequency_grid_spacing_and_limits():
-    t = np.arange(2001) * 0.25              # T = 500 s, cadence 0.25 s
+    t = np.arange(2001) * 0.25  # T = 500 s, cadence 0.25 s
     grid = frequency_grid(t, oversampling=10)
     assert grid[0] == pytest.approx(1 / 500.0, rel=1e-12)
     np.testing.assert_allclose(np.diff(grid), 1 / (10 * 500.0), rtol=1e-9)
@@ -170,7 +177,7 @@ def test_false_alarm_probability_of_noise_and_of_a_signal():
 def test_best_period_chain_on_topex(topex_pass):
     # The chain of STYLE.md: detrend -> periodogram -> best_period, disambiguated.
     pg = LightCurve.from_pass(topex_pass).detrend().periodogram()
-    assert pg.peak_period_s == pytest.approx(2.371, abs=0.002)     # the plain LS peak: a quarter
+    assert pg.peak_period_s == pytest.approx(2.371, abs=0.002)  # the plain LS peak: a quarter
     assert pg.best_period.unit == u.s
     assert pg.best_period.value == pytest.approx(9.48, abs=0.02)
 

@@ -1,4 +1,5 @@
 """Geometry never touches the network: the ephemeris and time tables ship with the packages."""
+
 from __future__ import annotations
 
 import socket
@@ -36,10 +37,10 @@ GEOMETRY = textwrap.dedent(
         print("network blocked")
 
     import numpy as np
-    from raycast.attitude import PrecessingSpin
-    from raycast.geometry import PassGeometry
-    from raycast.orbit import Satellite
-    from raycast.site import DERENIVKA
+    from raycast.geometry.attitude import PrecessingSpin
+    from raycast.geometry.pass_geometry import PassGeometry
+    from raycast.geometry.orbit import Satellite
+    from ingest.site import DERENIVKA
 
     satellite = Satellite.from_tle([
         "1 22076U 92052A   24212.51246405 -.00000054  00000-0  29042-4 0  9994",
@@ -55,7 +56,10 @@ GEOMETRY = textwrap.dedent(
 def test_a_fresh_process_computes_geometry_with_the_network_unreachable():
     result = subprocess.run(
         [sys.executable, "-c", BLOCK_NETWORK + GEOMETRY],
-        cwd=PROJECT_ROOT, capture_output=True, text=True, timeout=300,
+        cwd=PROJECT_ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
     )
     assert result.returncode == 0, result.stderr[-2000:]
     lines = result.stdout.splitlines()
@@ -68,10 +72,10 @@ def test_a_fresh_process_computes_geometry_with_the_network_unreachable():
 
 
 def test_loading_the_ephemeris_again_needs_no_network(monkeypatch):
-    from raycast import ephemeris
-    from raycast.geometry import PassGeometry
-    from raycast.orbit import Satellite
-    from raycast.site import UZHHOROD
+    from ingest.site import UZHHOROD
+    from raycast.geometry import ephemeris
+    from raycast.geometry.orbit import Satellite
+    from raycast.geometry.pass_geometry import PassGeometry
 
     def refuse(*args, **kwargs):
         raise OSError("network access attempted while the test forbids it")
@@ -85,8 +89,13 @@ def test_loading_the_ephemeris_again_needs_no_network(monkeypatch):
     for cached in (ephemeris.loader, ephemeris.timescale, ephemeris.planets):
         cached.cache_clear()
     assert ephemeris.planets()["sun"] is not None
-    satellite = Satellite.from_tle([
-        "1 40358U 14086A   24009.55814244  .00000043  00000-0  83941-4 0  9993",
-        "2 40358  67.1523  12.8839 0007020 252.7955 107.2362 13.97588796459621"])
-    geometry = PassGeometry.compute(satellite, UZHHOROD, np.datetime64("2024-01-09T18:00") + np.arange(3) * np.timedelta64(1, "s"))
+    satellite = Satellite.from_tle(
+        [
+            "1 40358U 14086A   24009.55814244  .00000043  00000-0  83941-4 0  9993",
+            "2 40358  67.1523  12.8839 0007020 252.7955 107.2362 13.97588796459621",
+        ]
+    )
+    geometry = PassGeometry.compute(
+        satellite, UZHHOROD, np.datetime64("2024-01-09T18:00") + np.arange(3) * np.timedelta64(1, "s")
+    )
     assert np.all(np.isfinite(geometry.range_km))

@@ -1,4 +1,5 @@
 """Satellite from TLE and OMM: parsing, validation, and propagation against authorities."""
+
 from __future__ import annotations
 
 import datetime as dt
@@ -7,9 +8,10 @@ import math
 import numpy as np
 import pytest
 
-from raycast.geometry import PassGeometry
-from raycast.orbit import Satellite, tle_checksum
-from raycast.site import DERENIVKA
+from ingest.elements import tle_checksum
+from ingest.site import DERENIVKA
+from raycast.geometry.orbit import Satellite
+from raycast.geometry.pass_geometry import PassGeometry
 from tests.conftest import TLES
 
 
@@ -37,11 +39,23 @@ TOPEX_PLUS = element_set("'+' signs")
 # The TOPEX 2024-07-30 element set as CelesTrak publishes it in OMM JSON (numbers) and as
 # Space-Track does (strings): the same elements, field for field.
 TOPEX_OMM_CELESTRAK = {
-    "OBJECT_NAME": "TOPEX/POSEIDON", "OBJECT_ID": "1992-052A", "EPOCH": "2024-07-30T12:17:56.893920",
-    "MEAN_MOTION": 12.8106666, "ECCENTRICITY": 0.0008045, "INCLINATION": 66.0414,
-    "RA_OF_ASC_NODE": 118.8147, "ARG_OF_PERICENTER": 267.5347, "MEAN_ANOMALY": 265.0431,
-    "EPHEMERIS_TYPE": 0, "CLASSIFICATION_TYPE": "U", "NORAD_CAT_ID": 22076, "ELEMENT_SET_NO": 999,
-    "REV_AT_EPOCH": 49552, "BSTAR": 2.9042e-05, "MEAN_MOTION_DOT": -5.4e-07, "MEAN_MOTION_DDOT": 0,
+    "OBJECT_NAME": "TOPEX/POSEIDON",
+    "OBJECT_ID": "1992-052A",
+    "EPOCH": "2024-07-30T12:17:56.893920",
+    "MEAN_MOTION": 12.8106666,
+    "ECCENTRICITY": 0.0008045,
+    "INCLINATION": 66.0414,
+    "RA_OF_ASC_NODE": 118.8147,
+    "ARG_OF_PERICENTER": 267.5347,
+    "MEAN_ANOMALY": 265.0431,
+    "EPHEMERIS_TYPE": 0,
+    "CLASSIFICATION_TYPE": "U",
+    "NORAD_CAT_ID": 22076,
+    "ELEMENT_SET_NO": 999,
+    "REV_AT_EPOCH": 49552,
+    "BSTAR": 2.9042e-05,
+    "MEAN_MOTION_DOT": -5.4e-07,
+    "MEAN_MOTION_DDOT": 0,
 }
 TOPEX_OMM_SPACETRACK = {key: str(value) for key, value in TOPEX_OMM_CELESTRAK.items()}
 
@@ -98,7 +112,7 @@ def test_propagation_matches_skyfield_earth_satellite():
     satellite = Satellite.from_tle(TOPEX_2024)
     from skyfield.api import EarthSatellite
 
-    from raycast.ephemeris import timescale
+    from raycast.geometry.ephemeris import timescale
 
     reference = EarthSatellite(TOPEX_2024[1], TOPEX_2024[2], TOPEX_2024[0], timescale())
     t = timescale().utc(2024, 7, 30, 21, 22, np.arange(0.0, 600.0, 60.0))
@@ -130,7 +144,10 @@ def test_checksum_of_every_stored_line_is_valid():
         ([TOPEX_2024[1][:-1] + "5", TOPEX_2024[2]], "TLE line 1 checksum is 4 but the line ends in '5'"),
         ([TOPEX_2024[1][:60], TOPEX_2024[2]], "TLE line 1 has 60 characters instead of 69"),
         ([TOPEX_2024[2], TOPEX_2024[1]], "TLE line 1 must start with '1 '"),
-        ([TOPEX_2024[1], element_set("COSMOS 2502")[2]], "TLE lines disagree on the catalogue number ('22076' vs '40358')"),
+        (
+            [TOPEX_2024[1], element_set("COSMOS 2502")[2]],
+            "TLE lines disagree on the catalogue number ('22076' vs '40358')",
+        ),
     ],
 )
 def test_bad_tle_is_refused_with_a_clear_message(lines, message):

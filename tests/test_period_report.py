@@ -1,4 +1,5 @@
 """The period survey command, stored results, the spin trend and the HTML report."""
+
 from __future__ import annotations
 
 import base64
@@ -14,13 +15,14 @@ import numpy as np
 import pytest
 
 from rsodb.archive import Archive
+from rsodb.campaign.period_survey import load_period_results, survey_periods
 from rsodb.cli import main
-from rsodb.period_survey import load_period_results, survey_periods
-from rsodb.periods import PeriodResult
-from rsodb.report import REPORT_KINDS, report_module
+from rsodb.cli.report import REPORT_KINDS
+from rsodb.fit.priors import Uniform
+from rsodb.periods.search import PeriodResult
+from rsodb.periods.trend import fit_period_trend, trend_from_results
 from rsodb.report.html import Document, Figure, Heading, Paragraph, Table
-from rsodb.report.periods import build_period_report
-from rsodb.spin_trend import fit_period_trend, trend_from_results
+from rsodb.report.period_report import build_period_report
 from tests.conftest import REAL_FILES
 
 
@@ -43,7 +45,7 @@ def test_cli_survey_stores_a_result_for_every_pass(surveyed, capsys):
     printed = json.loads(capsys.readouterr().out)
     assert status == 0 and printed["failures"] == [] and printed["stored_as"] == "default"
     by_id = {r["pass_id"]: r for r in printed["results"]}
-    assert len(by_id) == 5                                   # 3 ccd_phot passes + B and V of the phc
+    assert len(by_id) == 5  # 3 ccd_phot passes + B and V of the phc
     topex = next(r for r in printed["results"] if r["norad"] == 22076)
     assert topex["verdict"] == "confident" and abs(topex["best_period_s"] - 9.48) < 0.02
     assert topex["synodic"]["sidereal_prograde_s"] < topex["best_period_s"] < topex["synodic"]["sidereal_retrograde_s"]
@@ -61,13 +63,15 @@ def test_stored_pass_chain_and_prior_from_the_archive(surveyed):
     stored = archive.passes(norad=22076)[0]
     assert stored.detrend().periodogram().best_period.value == pytest.approx(9.48, abs=0.02)
     result = archive.load_result(stored.pass_id, "periods", "default", PeriodResult.from_hdf5)
-    prior = result.prior()
+    prior = Uniform(*result.prior_interval_s())
     assert prior.low < 9.48 < prior.high and prior.high - prior.low < 0.04 * 9.48
 
 
 def test_cli_table_output_and_errors(surveyed, capsys):
-    assert main(["periods", "--archive", str(surveyed), "--object", "44517", "--processes", "1", "--no-store",
-                 "--quiet"]) == 0
+    assert (
+        main(["periods", "--archive", str(surveyed), "--object", "44517", "--processes", "1", "--no-store", "--quiet"])
+        == 0
+    )
     out = capsys.readouterr().out
     assert "too short" in out and "stored" not in out
     assert main(["periods", "--archive", str(surveyed), "--processes", "0"]) == 2
@@ -83,9 +87,9 @@ def test_report_command_writes_a_self_contained_page(surveyed, tmp_path, capsys)
     assert f"wrote {out}" in capsys.readouterr().out
     page = out.read_text()
     # No external references: every image is inline base64 PNG.
-    assert "http://" not in page and "https://" not in page and "src=\"data:image/png;base64," in page
+    assert "http://" not in page and "https://" not in page and 'src="data:image/png;base64,' in page
     images = re.findall(r'src="data:image/png;base64,([A-Za-z0-9+/=]+)"', page)
-    assert len(images) == 1 + 3                               # trend + one figure per pass (B, V, March)
+    assert len(images) == 1 + 3  # trend + one figure per pass (B, V, March)
     for encoded in images:
         picture = mpimg.imread(io.BytesIO(base64.b64decode(encoded)), format="png")
         assert picture.shape[0] > 300 and picture.shape[1] > 600
@@ -98,20 +102,21 @@ def test_report_command_writes_a_self_contained_page(surveyed, tmp_path, capsys)
 def test_report_without_results_says_what_to_run(tmp_path, capsys):
     archive = Archive(tmp_path / "a")
     archive.ingest([str(REAL_FILES[0])], progress=False)
-    status = main(["report", "periods", "--archive", str(tmp_path / "a"), "--object", "22076",
-                   "--out", str(tmp_path / "r.html")])
+    status = main(
+        ["report", "periods", "--archive", str(tmp_path / "a"), "--object", "22076", "--out", str(tmp_path / "r.html")]
+    )
     assert status == 2
     assert "run 'rsodb periods --archive" in capsys.readouterr().err
     with pytest.raises(ValueError, match="object 22076 has no period results named 'default'"):
         build_period_report(archive, 22076)
 
 
-def test_report_kinds_table():
-    assert "periods" in REPORT_KINDS
-    module = report_module("periods")
-    assert callable(module.build_from_args) and module.DESCRIPTION
-    with pytest.raises(ValueError, match="unknown report kind 'survey'; known kinds: periods"):
-        report_module("survey")
+def test_report_kinds_table(capsys):
+    assert set(REPORT_KINDS) == {"periods", "campaign"}
+    assert all(description and callable(build) for description, _, _, build in REPORT_KINDS.values())
+    with pytest.raises(SystemExit):
+        main(["report", "survey", "--archive", "a", "--object", "1", "--out", "r.html"])
+    assert "invalid choice: 'survey'" in capsys.readouterr().err
 
 
 # -- spin trend --------------------------------------------------------------------------------
@@ -123,7 +128,7 @@ def test_trend_of_an_exact_line():
     # An exact line: slope to rounding, chi-square zero, errors from the weights alone.
     assert trend.slope_s_per_yr == pytest.approx(-0.16, abs=1e-9)
     assert trend.chi2_reduced == pytest.approx(0.0, abs=1e-12) and trend.birge_ratio == 1.0
-    sxx = np.sum((years - years.mean()) ** 2) / 0.01 ** 2
+    sxx = np.sum((years - years.mean()) ** 2) / 0.01**2
     assert trend.slope_err_s_per_yr == pytest.approx(1 / np.sqrt(sxx), rel=1e-9)
     np.testing.assert_allclose(trend.period_s(times), periods, atol=1e-9)
     assert "spinning up" in trend.summary()
@@ -155,9 +160,12 @@ def test_trend_from_results_counts_the_synodic_correction_as_error(surveyed):
 # -- HTML builder ------------------------------------------------------------------------------
 def test_document_is_immutable_escaped_and_written_atomically(tmp_path):
     doc = Document("A <b> report")
-    bigger = doc.add(Heading("Section & more"), Paragraph("1 < 2"),
-                     Table(("a", "b"), (("x", "1.5"),), numeric=frozenset({1})),
-                     Figure(b"\x89PNG fake", "caption"))
+    bigger = doc.add(
+        Heading("Section & more"),
+        Paragraph("1 < 2"),
+        Table(("a", "b"), (("x", "1.5"),), numeric=frozenset({1})),
+        Figure(b"\x89PNG fake", "caption"),
+    )
     assert doc.blocks == () and len(bigger.blocks) == 4
     html = bigger.to_html()
     assert "<title>A &lt;b&gt; report</title>" in html and "<p>1 &lt; 2</p>" in html

@@ -1,5 +1,6 @@
 """Period search: harmonic fits against exact least squares, the synodic correction against a
 simulated spinning body, the real passes of ../shared/data, storage and priors."""
+
 from __future__ import annotations
 
 import math
@@ -10,12 +11,25 @@ import pytest
 
 import ingest
 from rsodb.fit.priors import Uniform
-from rsodb.harmonic import SeriesData, bic, fit_harmonics, harmonic_basis, nested_rss, normal_equations, \
-    refine_frequency
-from rsodb.lightcurve import LightCurve
-from rsodb.periods import PeriodResult, PeriodSettings, analyse_pass, find_period
-from rsodb.synodic import SynodicCorrection, azimuth_rate_rad_s, bisector_rate_rad_s, phase_angle_bisector, \
-    sidereal_period_s
+from rsodb.periods.analysis import analyse_pass
+from rsodb.periods.harmonic import (
+    SeriesData,
+    bic,
+    fit_harmonics,
+    harmonic_basis,
+    nested_rss,
+    normal_equations,
+    refine_frequency,
+)
+from rsodb.periods.lightcurve import LightCurve
+from rsodb.periods.search import PeriodResult, PeriodSettings, find_period
+from rsodb.periods.synodic import (
+    SynodicCorrection,
+    azimuth_rate_rad_s,
+    bisector_rate_rad_s,
+    phase_angle_bisector,
+    sidereal_period_s,
+)
 from tests.conftest import COSMOS2540_PHV, COSMOS2553_JD_PHV, COSMOS2553_PHC, TOPEX_PHV
 
 
@@ -59,7 +73,7 @@ def test_nested_rss_equals_separate_least_squares_fits_for_every_harmonic_count(
     for i, f in enumerate(frequencies):
         a = explicit_design(data, f, 6)
         for k in range(7):
-            cols = a[:, :4 + 2 * k]
+            cols = a[:, : 4 + 2 * k]
             c, *_ = np.linalg.lstsq(cols * sw[:, None], data.y * sw, rcond=None)
             rss = np.sum(data.weight * (data.y - cols @ c) ** 2)
             assert batch[i, k] == pytest.approx(rss, rel=1e-9)
@@ -73,8 +87,13 @@ def test_bic_formula_and_effective_sample_size():
 def test_fit_recovers_a_noiseless_series_and_its_frequency():
     t = np.arange(3000) * 0.1
     f_true = 1 / 9.7
-    y = 5 + 0.2 * (t / 150 - 1) + 0.6 * np.cos(2 * np.pi * f_true * (t - 149.95)) \
-        - 0.3 * np.sin(4 * np.pi * f_true * (t - 149.95)) + 0.1 * np.cos(6 * np.pi * f_true * (t - 149.95) + 1)
+    y = (
+        5
+        + 0.2 * (t / 150 - 1)
+        + 0.6 * np.cos(2 * np.pi * f_true * (t - 149.95))
+        - 0.3 * np.sin(4 * np.pi * f_true * (t - 149.95))
+        + 0.1 * np.cos(6 * np.pi * f_true * (t - 149.95) + 1)
+    )
     data = SeriesData.from_arrays(t, y, np.ones_like(t), 3)
     # Start 0.1 / T off the truth; noiseless, only the parabolic interpolation errs: within
     # 1e-4 of the resolution 1/T (3e-7 Hz, i.e. 3e-5 s on the period).
@@ -106,7 +125,7 @@ def test_bisector_rates_of_a_uniform_rotation():
     # speed is omega cos h / sqrt(cos^2 h + tau^2) while its azimuth about z still turns at omega.
     tau, h = 0.2, 0.4
     tilted = phase_angle_bisector(*rotating_directions(t, omega, half_angle_rad=h, tilt=tau))
-    radius = math.cos(h) / math.sqrt(math.cos(h) ** 2 + tau ** 2)
+    radius = math.cos(h) / math.sqrt(math.cos(h) ** 2 + tau**2)
     assert bisector_rate_rad_s(t, tilted) == pytest.approx(omega * radius, rel=1e-6)
     assert azimuth_rate_rad_s(t, tilted, [0, 0, 1]) == pytest.approx(omega, rel=1e-9)
     assert azimuth_rate_rad_s(t, tilted, [0, 0, -2]) == pytest.approx(-omega, rel=1e-9)
@@ -138,7 +157,7 @@ def test_synodic_period_of_a_simulated_spinning_body_converts_back_to_the_sidere
 
 
 def test_topex_synodic_correction_from_the_pass_geometry(topex_result):
-    from raycast.geometry import PassGeometry
+    from raycast.geometry.pass_geometry import PassGeometry
 
     correction = topex_result.synodic
     assert correction is not None and topex_result.synodic_note == ""
@@ -152,8 +171,9 @@ def test_topex_synodic_correction_from_the_pass_geometry(topex_result):
     assert 0.05 < correction.bisector_rate_deg_s < 0.12
     p = topex_result.best_period_s
     assert correction.sidereal_prograde_s < p < correction.sidereal_retrograde_s
-    assert correction.max_correction_s == pytest.approx(p * p * math.radians(correction.bisector_rate_deg_s)
-                                                        / (2 * math.pi), rel=0.01)
+    assert correction.max_correction_s == pytest.approx(
+        p * p * math.radians(correction.bisector_rate_deg_s) / (2 * math.pi), rel=0.01
+    )
 
 
 # -- the real passes ---------------------------------------------------------------------------
@@ -217,7 +237,7 @@ def test_too_few_samples_is_too_short_not_an_exception():
 
 
 def test_find_period_rejects_non_lightcurves_and_unknown_settings():
-    with pytest.raises(TypeError, match="needs a rsodb.lightcurve.LightCurve, got ndarray"):
+    with pytest.raises(TypeError, match="needs a rsodb.periods.LightCurve, got ndarray"):
         find_period(np.zeros(10))
     lc = LightCurve.from_arrays(np.arange(50.0), np.zeros(50))
     with pytest.raises(TypeError, match="unknown period setting"):
@@ -251,17 +271,17 @@ def test_from_hdf5_refuses_other_groups(tmp_path):
 
 def test_prior_for_fits(topex_result):
     p = topex_result.best_period_s
-    synodic = topex_result.prior(0.01, frame="synodic")
+    synodic = Uniform(*topex_result.prior_interval_s(0.01, frame="synodic"))
     assert isinstance(synodic, Uniform)
     assert synodic.bounds == pytest.approx((0.99 * p, 1.01 * p), rel=1e-12)
-    sidereal = topex_result.prior()
+    sidereal = Uniform(*topex_result.prior_interval_s())
     shorter, longer = topex_result.sidereal_bounds_s
     # Widened by the bisector correction on each side, so either sense of rotation is inside.
     assert sidereal.low == pytest.approx(0.99 * p - (p - shorter), rel=1e-12)
     assert sidereal.high == pytest.approx(1.01 * p + (longer - p), rel=1e-12)
     with pytest.raises(ValueError, match="width_frac=0.7 must be a fraction between 0 and 0.5"):
-        topex_result.prior(0.7)
+        topex_result.prior_interval_s(0.7)
     short = analyse_pass(passes_of(COSMOS2540_PHV)["V"], geometry=False)
     with pytest.raises(ValueError, match="has verdict 'too short'.*give the spin-period prior yourself"):
-        short.prior()
-    assert short.prior(force=True).low > 0
+        short.prior_interval_s()
+    assert short.prior_interval_s(force=True)[0] > 0

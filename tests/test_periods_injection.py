@@ -4,13 +4,14 @@ Recovered = a verdict naming a period and the +-1% fit prior containing the trut
 asserted with margins set from the binomial scatter of the sample sizes used; every case is
 seeded, so a failure is reproducible.
 """
+
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from rsodb.injection import SHAPES, Injection, recover, synthetic_lightcurve
-from rsodb.periods import find_period
+from rsodb.periods.injection import SHAPES, Injection, recover, synthetic_lightcurve
+from rsodb.periods.search import find_period
 
 
 def run(injections):
@@ -22,7 +23,8 @@ def test_recovery_across_shapes_periods_amplitudes_and_noise():
     injections = [
         Injection(shape, period, amplitude, noise, seed=100 + i)
         for i, (shape, period, amplitude, noise) in enumerate(
-            (s, p, a, n) for s in SHAPES for p in (2.7, 6.0, 17.0, 45.0) for a in (0.4, 1.0) for n in (0.03, 0.15))
+            (s, p, a, n) for s in SHAPES for p in (2.7, 6.0, 17.0, 45.0) for a in (0.4, 1.0) for n in (0.03, 0.15)
+        )
     ]
     table = run(injections)
     # Measured 63/64 when written; a rate below 60/64 (94%) would be a real regression.
@@ -35,8 +37,10 @@ def test_recovery_across_shapes_periods_amplitudes_and_noise():
 
 
 def test_gaps_and_red_noise():
-    injections = [Injection(shape, 7.7, 0.6, 0.1, gap_fraction=0.3, red_noise_rho=0.7, seed=200 + i)
-                  for i, shape in enumerate(s for s in SHAPES for _ in range(6))]
+    injections = [
+        Injection(shape, 7.7, 0.6, 0.1, gap_fraction=0.3, red_noise_rho=0.7, seed=200 + i)
+        for i, shape in enumerate(s for s in SHAPES for _ in range(6))
+    ]
     table = run(injections)
     # 30% of the pass missing and AR(1) noise (rho 0.7): measured 21/24 (the weak asymmetry of
     # the four-faced shape, 3/6, is then often lost to the noise). At least 18/24 (75%).
@@ -63,8 +67,12 @@ def test_uncertainty_is_not_too_small_under_red_noise():
 
 
 def test_two_faced_curve_with_nearly_equal_halves():
-    table = run([Injection("two_faced", 9.5, 1.0, 0.1, asymmetry=a, seed=500 + i)
-                 for i, a in enumerate(a for a in (0.0, 0.03, 0.1) for _ in range(10))])
+    table = run(
+        [
+            Injection("two_faced", 9.5, 1.0, 0.1, asymmetry=a, seed=500 + i)
+            for i, a in enumerate(a for a in (0.0, 0.03, 0.1) for _ in range(10))
+        ]
+    )
     equal = table[table.asymmetry == 0.0]
     # Identical halves: the light curve itself repeats every 4.75 s, and no photometric method
     # can tell the rotation is twice that. At least 8 of 10 report the curve's own period.
@@ -79,9 +87,14 @@ def test_two_faced_curve_with_nearly_equal_halves():
 
 
 def test_fewer_than_three_cycles_is_too_short():
-    table = run([Injection(shape, period, 1.0, 0.1, seed=600 + i)
-                 for i, (shape, period) in enumerate((s, p) for s in ("sinusoid", "two_faced")
-                                                     for p in (100.0, 170.0, 250.0) for _ in range(3))])
+    table = run(
+        [
+            Injection(shape, period, 1.0, 0.1, seed=600 + i)
+            for i, (shape, period) in enumerate(
+                (s, p) for s in ("sinusoid", "two_faced") for p in (100.0, 170.0, 250.0) for _ in range(3)
+            )
+        ]
+    )
     # 500 s pass: 100 s is 5 cycles (a period), 170 s is 2.9 and 250 s is 2 (too short).
     assert (table[table.period_s == 100.0].verdict == "confident").all()
     assert (table[table.period_s > 150].verdict == "too short").all()
@@ -100,8 +113,9 @@ def test_noise_alone_gives_no_confident_period():
 def test_cadence_commensurate_with_the_period_is_flagged():
     # 2.5 s at a 0.2 s cadence is 12.5 samples: harmonics above the Nyquist frequency alias onto
     # the odd harmonics of 5 s, so the sampled glint curve really repeats every 5 s.
-    results = [find_period(synthetic_lightcurve(Injection("four_faced", 2.5, 1.0, 0.03, seed=18000 + i)))
-               for i in range(2)]
+    results = [
+        find_period(synthetic_lightcurve(Injection("four_faced", 2.5, 1.0, 0.03, seed=18000 + i))) for i in range(2)
+    ]
     for result in results:
         if abs(result.best_period_s - 5.0) < 0.01:
             assert result.verdict == "ambiguous harmonic"

@@ -3,6 +3,7 @@
 Authorities: truth.json beside the samples (the spin states they were rendered from, and the
 apparent period the project's period search finds on each noiseless rendered curve).
 """
+
 from __future__ import annotations
 
 import json
@@ -11,8 +12,9 @@ from pathlib import Path
 import pytest
 
 from rsodb.archive import Archive
+from rsodb.campaign.period_survey import survey_periods
 from rsodb.cli import main
-from rsodb.period_survey import survey_periods
+from rsodb.fit.priors import Uniform
 
 DATA_SAMPLES = Path(__file__).resolve().parents[1] / "data_samples"
 
@@ -39,7 +41,11 @@ def test_period_survey_recovers_each_apparent_period(surveyed, truth_by_file):
         # The noisy file's period agrees with the noiseless curve's to 4 sigma of the search's
         # own error (a wrong harmonic or a broken reduction would be off by a factor or by tens of sigma).
         assert abs(result.best_period_s - record["apparent_period_s"]) < 4 * result.uncertainty_s + 1e-4, (
-            record["file"], result.best_period_s, result.uncertainty_s, record["apparent_period_s"])
+            record["file"],
+            result.best_period_s,
+            result.uncertainty_s,
+            record["apparent_period_s"],
+        )
 
 
 def test_fit_prior_from_the_stored_period_contains_the_true_spin_period(surveyed, truth_by_file):
@@ -49,7 +55,7 @@ def test_fit_prior_from_the_stored_period_contains_the_true_spin_period(surveyed
     archive, survey = surveyed
     for result in survey.results:
         spin_period_s = truth_by_file[archive.get(result.pass_id).source_name]["truth"]["spin_period_s"]
-        prior = result.prior()
+        prior = Uniform(*result.prior_interval_s())
         assert prior.low < spin_period_s < prior.high, (result.pass_id, prior, spin_period_s)
         # ... and the apparent period is not simply the spin period: the difference is physical.
         assert abs(result.best_period_s / spin_period_s - 1) > 1e-3
@@ -61,8 +67,10 @@ def test_pipeline_on_the_samples_writes_reports_and_fits_near_the_truth(tmp_path
     from rsodb.fit.runner import load_periods
 
     reports = tmp_path / "reports"
-    assert main(["pipeline", str(DATA_SAMPLES), "--archive", str(tmp_path / "archive"), "--out", str(reports),
-                 "--quiet"]) == 0
+    assert (
+        main(["pipeline", str(DATA_SAMPLES), "--archive", str(tmp_path / "archive"), "--out", str(reports), "--quiet"])
+        == 0
+    )
     out = capsys.readouterr().out
     index = (reports / "index.html").resolve()
     assert f"open {index} to start" in out
@@ -78,7 +86,7 @@ def test_pipeline_on_the_samples_writes_reports_and_fits_near_the_truth(tmp_path
         record = truth_by_file[stored.source_name]
         fit = archive.load_result(row.pass_id, "fits", "quick", FitResult.from_hdf5).to_dict()
         spin = fit["parameters"]["spin_period_s"]
-        prior = load_periods(archive, row.pass_id).prior()
+        prior = Uniform(*load_periods(archive, row.pass_id).prior_interval_s())
         assert prior.low <= spin["p16"] <= spin["median"] <= spin["p84"] <= prior.high, (stored.source_name, spin)
         if record["norad"] == 22076:
             # The short fit finds TOPEX's mode: a period 0.3% off would slip the glints by a

@@ -4,6 +4,7 @@ Each case is built from the first rows of a real file (written to tmp_path, neve
 so that exactly one thing is wrong, and the test checks the full message: the file, the
 1-based line and the reason.
 """
+
 from __future__ import annotations
 
 import gzip
@@ -24,7 +25,7 @@ FIRST_ROW = 17
 @pytest.fixture
 def lines(shared_data):
     """The COSMOS 2540 header and its first 8 rows, as a list of lines."""
-    return COSMOS2540_PHV.read_text().splitlines()[:FIRST_ROW - 1 + 8]
+    return COSMOS2540_PHV.read_text().splitlines()[: FIRST_ROW - 1 + 8]
 
 
 def write(tmp_path, lines_or_bytes, name="bad.phV"):
@@ -41,7 +42,7 @@ def message(path) -> str:
         ingest.read_file(path)
     error = info.value
     assert str(error).startswith(f"{path}:" if error.line is None else f"{path}:{error.line}: ")
-    return str(error)[len(str(path)):]
+    return str(error)[len(str(path)) :]
 
 
 def set_field(line: str, index: int, value: str) -> str:
@@ -57,29 +58,33 @@ def test_empty_file(tmp_path):
 
 def test_whitespace_only_file(tmp_path):
     assert message(write(tmp_path, b" \n\n\t\n")) == (
-        ": the file is empty (only whitespace); an observation file needs a header and data rows")
+        ": the file is empty (only whitespace); an observation file needs a header and data rows"
+    )
 
 
 def test_header_only(tmp_path, lines):
-    assert message(write(tmp_path, lines[:FIRST_ROW - 1])) == ":17: the header is not followed by any data rows"
+    assert message(write(tmp_path, lines[: FIRST_ROW - 1])) == ":17: the header is not followed by any data rows"
 
 
 def test_header_without_column_line(tmp_path, lines):
-    assert message(write(tmp_path, lines[:FIRST_ROW - 2])) == (
-        ":15: the header ends without the column line ('# Date UT X Y ...' or '# JD X Y ...') and no data rows follow")
+    assert message(write(tmp_path, lines[: FIRST_ROW - 2])) == (
+        ":15: the header ends without the column line ('# Date UT X Y ...' or '# JD X Y ...') and no data rows follow"
+    )
 
 
 def test_truncated_mid_row(tmp_path, lines):
     text = "\n".join(lines) + "\n" + lines[-1][:60]  # a 9th row cut after 60 characters, no newline
     assert message(write(tmp_path, text.encode())) == (
-        ":25: the last row has 5 of 14 columns and no line end: the file looks truncated")
+        ":25: the last row has 5 of 14 columns and no line end: the file looks truncated"
+    )
 
 
 def test_row_with_a_missing_column(tmp_path, lines):
     lines[FIRST_ROW + 1] = " ".join(lines[FIRST_ROW + 1].split()[:-1])  # line 19 loses its file name
     assert message(write(tmp_path, lines)) == (
         ":19: the row has 13 columns, expected 14 (Date UT X Y Xerr Yerr Flux Flux_err magV mag_err Az(deg) "
-        "El(deg) Rg(Km) filename)")
+        "El(deg) Rg(Km) filename)"
+    )
 
 
 def test_row_with_an_extra_column(tmp_path, lines):
@@ -97,7 +102,9 @@ def test_decimal_comma_is_not_a_number(tmp_path, lines):
     assert message(write(tmp_path, lines)) == ":18: magV is '6,238', which is not a number"
 
 
-@pytest.mark.parametrize("index, value, label", [(8, "nan", "magV"), (10, "inf", "Az(deg)"), (12, "-Infinity", "Rg(Km)")])
+@pytest.mark.parametrize(
+    "index, value, label", [(8, "nan", "magV"), (10, "inf", "Az(deg)"), (12, "-Infinity", "Rg(Km)")]
+)
 def test_nan_and_inf(tmp_path, lines, index, value, label):
     lines[FIRST_ROW + 4] = set_field(lines[FIRST_ROW + 4], index, value)
     assert message(write(tmp_path, lines)) == f":22: {label} is '{value}'; every value must be a finite number"
@@ -107,14 +114,16 @@ def test_times_out_of_order(tmp_path, lines):
     lines[FIRST_ROW + 2], lines[FIRST_ROW + 3] = lines[FIRST_ROW + 3], lines[FIRST_ROW + 2]
     assert message(write(tmp_path, lines)) == (
         ":21: time 2025-01-30 17:36:51.108 is earlier than the previous row's 2025-01-30 17:36:51.208 (line 20); "
-        "rows must be in time order without repeats")
+        "rows must be in time order without repeats"
+    )
 
 
 def test_duplicate_time(tmp_path, lines):
     lines.insert(FIRST_ROW + 1, lines[FIRST_ROW])
     assert message(write(tmp_path, lines)) == (
         ":19: time 2025-01-30 17:36:50.907 repeats the previous row's 2025-01-30 17:36:50.907 (line 18); "
-        "rows must be in time order without repeats")
+        "rows must be in time order without repeats"
+    )
 
 
 @pytest.mark.parametrize("value", ["-9042.3732", "0.0000"])
@@ -124,7 +133,8 @@ def test_negative_or_zero_flux_rejects_the_file(tmp_path, lines, value):
     lines[FIRST_ROW + 1] = set_field(lines[FIRST_ROW + 1], 6, value)
     assert message(write(tmp_path, lines)) == (
         f":19: Flux {value} is not positive: ccd_phot never writes such a row because its magnitude would be "
-        "undefined; remove the row or fix the value")
+        "undefined; remove the row or fix the value"
+    )
 
 
 def test_bad_date_and_time_tokens(tmp_path, lines):
@@ -140,7 +150,8 @@ def test_julian_dates_out_of_order(tmp_path, shared_data):
     lines[19], lines[20] = lines[20], lines[19]
     assert message(write(tmp_path, lines)) == (
         ":21: time 2460746.23009745 is earlier than the previous row's 2460746.2300986084 (line 20); rows must "
-        "be in time order without repeats")
+        "be in time order without repeats"
+    )
 
 
 def test_bad_julian_date(tmp_path, shared_data):
@@ -160,7 +171,8 @@ def test_range_in_megametres_is_refused(tmp_path, lines):
         lines[k] = set_field(lines[k], 12, f"{float(tokens[12]) / 1000:.6f}")
     assert message(write(tmp_path, lines)) == (
         ":17: the range column's median is 2.09053, so it is not in km as ccd_phot writes it (even under the "
-        "label Rg(Mm)); convert it to km")
+        "label Rg(Mm)); convert it to km"
+    )
 
 
 # -- encodings and binary data ------------------------------------------------------------
@@ -169,7 +181,8 @@ def test_latin1_header_is_wrong_encoding(tmp_path, lines):
     path = tmp_path / "bad.phV"
     path.write_bytes(("\n".join(lines) + "\n").encode("latin-1"))
     assert message(path) == (
-        ":11: byte 0xe9 at column 24 is not UTF-8 text; the file is in another encoding: save it as UTF-8 or ASCII")
+        ":11: byte 0xe9 at column 24 is not UTF-8 text; the file is in another encoding: save it as UTF-8 or ASCII"
+    )
 
 
 def test_utf16_file(tmp_path, lines):
@@ -192,7 +205,9 @@ def test_cyrillic_digit_lookalike_in_data(tmp_path, lines):
 def test_binary_garbage(tmp_path):
     garbage = np.random.default_rng(7).integers(0, 256, 5000, dtype=np.uint8).tobytes()
     text = message(write(tmp_path, garbage, "garbage.phV"))
-    assert text.startswith(":1: control byte 0x") and text.endswith(": this is binary data, not a text observation file")
+    assert text.startswith(":1: control byte 0x") and text.endswith(
+        ": this is binary data, not a text observation file"
+    )
 
 
 def test_gzipped_file(tmp_path, shared_data):
@@ -203,7 +218,7 @@ def test_gzipped_file(tmp_path, shared_data):
 def test_nul_byte_inside_a_row(tmp_path, lines):
     data = ("\n".join(lines) + "\n").encode()
     offset = data.index(b"c2540_V_00004.fits")
-    path = write(tmp_path, data[:offset] + b"\x00" + data[offset + 1:])
+    path = write(tmp_path, data[:offset] + b"\x00" + data[offset + 1 :])
     assert message(path) == ":20: control byte 0x00 at column 148: this is binary data, not a text observation file"
 
 
@@ -230,8 +245,10 @@ def test_file_larger_than_the_limit(tmp_path):
     path = tmp_path / "huge.phV"
     with open(path, "wb") as stream:  # sparse: no disk space used
         stream.truncate(MAX_FILE_BYTES + 1)
-    assert message(path) == (f": the file is {(MAX_FILE_BYTES + 1) / 2**20:.1f} MiB, more than the 64 MiB an "
-                             "observation file can hold; split it or check that it is an observation file")
+    assert message(path) == (
+        f": the file is {(MAX_FILE_BYTES + 1) / 2**20:.1f} MiB, more than the 64 MiB an "
+        "observation file can hold; split it or check that it is an observation file"
+    )
 
 
 def test_directory_is_an_os_error(tmp_path):
@@ -253,28 +270,31 @@ def test_bad_dt(tmp_path, lines):
 def test_tle_checksum(tmp_path, lines):
     lines[2] = lines[2][:-1] + "0"  # checksum 8 -> 0
     assert message(write(tmp_path, lines)) == (
-        ":2: TLE line 1 has checksum '0' but its characters give 8; the elements are corrupted; fix the TLE block "
-        "after '# TLE:'")
+        ":2: TLE line 1 checksum is 8 but the line ends in '0': "
+        "'1 44517U 19057A   25029.57053304  .00000050  00000-0  81985-4 0  9990'; "
+        "check that it was copied without changes; fix the TLE block after '# TLE:'"
+    )
 
 
 def test_norad_disagrees_with_tle(tmp_path, lines):
     lines[9] = "# NORAD  = 44518"
     assert message(write(tmp_path, lines)) == (
-        ":2: the TLE is for NORAD 44517 but the header says NORAD 44518; the file mixes two objects")
+        ":2: the TLE is for NORAD 44517 but the header says NORAD 44518; the file mixes two objects"
+    )
 
 
 def test_no_object_named(tmp_path, lines):
     lines = lines[4:]  # no TLE
     lines.remove("# NORAD  = 44517")
-    assert message(write(tmp_path, lines)) == (
-        ":11: the header names no object: add '# NORAD = <number>' or a TLE/OMM")
+    assert message(write(tmp_path, lines)) == (":11: the header names no object: add '# NORAD = <number>' or a TLE/OMM")
 
 
 def test_bad_omm(tmp_path, lines):
     lines = ['# OMM: {"NORAD_CAT_ID": 44517, "OBJECT_NAME": "COSMOS 2540"'] + lines[4:]
     assert message(write(tmp_path, lines)) == (
         ":1: the OMM record is not valid JSON (Expecting ',' delimiter at character 53); write the record as one "
-        "JSON object on this line")
+        "JSON object on this line"
+    )
 
 
 def test_unknown_column_line(tmp_path, lines):
@@ -282,14 +302,16 @@ def test_unknown_column_line(tmp_path, lines):
     assert message(write(tmp_path, lines)) == (
         ":16: the column line reads 'Date UT X Y Xerr Yerr Flux FluxErr magV mag_err Az(deg) El(deg) Rg(Km) "
         "filename'; expected the 14 ccd_phot columns 'Date UT X Y Xerr Yerr Flux Flux_err mag mag_err Az(deg) "
-        "El(deg) Rg filename' (mag and Rg may carry a suffix such as magV, Rg(Km))")
+        "El(deg) Rg filename' (mag and Rg may carry a suffix such as magV, Rg(Km))"
+    )
 
 
 def test_unknown_site_name(tmp_path, lines):
     lines = [line for line in lines if not line.startswith(("# SITE_LAT", "# SITE_LON", "# SITE_ELEV"))]
     lines[11] = "# SITE_NAME   = Kyiv"
     assert message(write(tmp_path, lines)) == (
-        ":12: SITE_NAME = 'Kyiv' is not a known site and the header has no SITE_LAT/SITE_LON/SITE_ELEV lines; add them")
+        ":12: SITE_NAME = 'Kyiv' is not a known site and the header has no SITE_LAT/SITE_LON/SITE_ELEV lines; add them"
+    )
 
 
 def test_incomplete_site(tmp_path, lines):
@@ -300,14 +322,16 @@ def test_incomplete_site(tmp_path, lines):
 def test_site_out_of_range(tmp_path, lines):
     lines[12] = "# SITE_LAT   = 148.56"
     assert message(write(tmp_path, lines)) == (
-        ":13: site 'Derenivka': lat_deg=148.56 is outside [-90.0, 90.0]; give geodetic degrees and metres")
+        ":13: site 'Derenivka': lat_deg=148.56 is outside [-90.0, 90.0]; give geodetic degrees and metres"
+    )
 
 
 def test_unknown_time_format(tmp_path, lines):
     lines.insert(8, "# Time_format = sometimes")
     assert message(write(tmp_path, lines)) == (
         ":9: Time_format = 'sometimes' is not understood; write UT or JD, optionally followed by start, mid or end "
-        "(the stamp's place in the exposure)")
+        "(the stamp's place in the exposure)"
+    )
 
 
 # -- phc ---------------------------------------------------------------------------------------
@@ -328,14 +352,16 @@ def test_phc_time_going_backwards(tmp_path, phc_lines):
     phc_lines[10] = phc_lines[10].replace("17:19:44", "17:19:42")
     assert message(write(tmp_path, phc_lines, "b.phc")) == (
         ":11: time 17:19:42.000000 is earlier than the previous row's 17:19:43.000000 (line 10); rows must be "
-        "in time order without repeats")
+        "in time order without repeats"
+    )
 
 
 def test_phc_wrong_column_line(tmp_path, phc_lines):
     phc_lines[6] = "  UT TIME            mB      mV      El(deg) Rg(Mm)"
     assert message(write(tmp_path, phc_lines, "b.phc")) == (
         ":7: the column line reads 'UT TIME            mB      mV      El(deg) Rg(Mm)'; expected 'UT TIME ImpB-fon "
-        "ImpV-fon FonB FonV mB mV Az(deg) El(deg) Rg(Mm)'")
+        "ImpV-fon FonB FonV mB mV Az(deg) El(deg) Rg(Mm)'"
+    )
 
 
 def test_phc_negative_sky(tmp_path, phc_lines):
@@ -351,4 +377,5 @@ def test_phc_missing_dt(tmp_path, phc_lines):
 def test_phc_truncated(tmp_path, phc_lines):
     data = ("\n".join(phc_lines) + "\n").encode()[:-40]
     assert message(write(tmp_path, data, "b.phc")) == (
-        ":20: the last row has 6 of 10 columns and no line end: the file looks truncated")
+        ":20: the last row has 6 of 10 columns and no line end: the file looks truncated"
+    )

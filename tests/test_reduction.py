@@ -4,6 +4,7 @@ Tolerances: the files print magnitudes to 0.001, so each written magnitude carri
 error uniform on +-0.0005 mag (RMS 0.00029); a fitted zero point or term over ~2000 rows is
 determined to ~1e-4, so PROVENANCE's one-decimal values must come out within 1e-3.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -11,12 +12,18 @@ import pytest
 
 import ingest
 from ingest.reduction import (
-    LAW_RMS_LIMIT_MAG, airmass, fit_note, fit_reduction, instrumental_mag, range_correction_mag, sign_corrected_mag,
+    LAW_RMS_LIMIT_MAG,
+    airmass,
+    fit_note,
+    fit_reduction,
+    instrumental_mag,
+    range_correction_mag,
+    sign_corrected_mag,
     standard_mag,
 )
 from tests.conftest import COSMOS2540_PHV, COSMOS2553_JD_PHV, COSMOS2553_PHC, TOPEX_PHV
 
-ROUNDING_HALF_STEP_MAG = 0.0005   # half the last printed digit of a magnitude
+ROUNDING_HALF_STEP_MAG = 0.0005  # half the last printed digit of a magnitude
 ROUNDING_RMS_MAG = 0.0005 / np.sqrt(3)  # RMS of a uniform +-0.0005 error: 2.9e-4
 
 
@@ -27,8 +34,9 @@ def test_equations_by_hand():
     assert airmass(np.array([90.0]))[0] == pytest.approx(1.0, abs=1e-12)
     assert range_correction_mag(np.array([10000.0, 1000.0])).tolist() == pytest.approx([-5.0, 0.0], abs=1e-12)
     # A + m_inst - k X + m_r = 20 - 10 - 0.3 * 2 - 5
-    assert standard_mag(np.array([1000.0]), 0.1, np.array([30.0]), np.array([10000.0]), 20.0, 0.3)[0] == \
-        pytest.approx(4.4, abs=1e-12)
+    assert standard_mag(np.array([1000.0]), 0.1, np.array([30.0]), np.array([10000.0]), 20.0, 0.3)[0] == pytest.approx(
+        4.4, abs=1e-12
+    )
 
 
 def test_undefined_inputs_give_nan():

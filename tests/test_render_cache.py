@@ -1,17 +1,18 @@
-"""The fast path (raycast.cache) against the direct renderer and exact answers."""
+"""The fast path (raycast.renderer.cache) against the direct renderer and exact answers."""
+
 import dataclasses
 import math
 
 import numpy as np
 import pytest
 
-from raycast.attitude import PrecessingSpin
-from raycast.brdf import GGX, Lambertian, Principled
-from raycast.cache import SceneCache, cube_grid_directions, cube_grid_weights
-from raycast.direct import DirectRenderer
+from raycast.geometry.attitude import PrecessingSpin
 from raycast.models import topex
-from raycast.render import render
-from raycast.scene import Articulation, Part, Scene
+from raycast.renderer.brdf import GGX, Lambertian
+from raycast.renderer.cache import SceneCache, cube_grid_directions, cube_grid_weights
+from raycast.renderer.direct import DirectRenderer
+from raycast.renderer.methods import render
+from raycast.renderer.scene import Articulation, Part, Scene
 from tests.conftest import MODELS
 from tests.render_support import dark_frames_agree, geometry, rms_mag, topex_pass_geometry, unit
 
@@ -76,11 +77,14 @@ def test_fast_path_matches_direct_along_real_topex_pass(model):
 
 def articulated_scene():
     panel = Part.box("panel", (0.05, 3.0, 1.5), "back", face_materials={"+x": "cells"}).transformed(
-        offset_m=(0.0, 2.6, 0.5))
-    return Scene.from_parts([Part.box("bus", (1.5, 1.5, 2.0), "paint"), panel],
-                            {"paint": Lambertian(0.6), "back": Lambertian(0.2), "cells": GGX(0.1, 0.35)},
-                            articulations=[Articulation("panel", "pitch_deg", (0.0, 1.1, 0.5), (0.0, 1.0, 0.0))],
-                            parameters={"pitch_deg": 10.0})
+        offset_m=(0.0, 2.6, 0.5)
+    )
+    return Scene.from_parts(
+        [Part.box("bus", (1.5, 1.5, 2.0), "paint"), panel],
+        {"paint": Lambertian(0.6), "back": Lambertian(0.2), "cells": GGX(0.1, 0.35)},
+        articulations=[Articulation("panel", "pitch_deg", (0.0, 1.1, 0.5), (0.0, 1.0, 0.0))],
+        parameters={"pitch_deg": 10.0},
+    )
 
 
 def test_elements_partly_covered_by_a_mount_are_quartered(monkeypatch):
@@ -89,7 +93,7 @@ def test_elements_partly_covered_by_a_mount_are_quartered(monkeypatch):
     # centroid alone would count them wholly covered or wholly open (0.012 mag off). Quartered
     # where their quarters disagree, they stay within 0.005 mag of the direct renderer (its own
     # error at 3 mm pixels is below 0.001 mag here).
-    import raycast.cache
+    import raycast.renderer.cache
 
     block = Part.box("block", (0.7, 0.7, 0.04), "paint", center_m=(0.13, -0.21, 0.02))
     scene = Scene.from_parts([Part.plate("plate", 2.0, 2.0, "paint"), block], {"paint": Lambertian(0.5)})
@@ -99,7 +103,7 @@ def test_elements_partly_covered_by_a_mount_are_quartered(monkeypatch):
     reference = DirectRenderer(scene, 0.003).intensity(sun, obs)
     quartered = SceneCache.build(scene, element_size_m=0.25)
     assert rms_mag(quartered.intensity(sun, obs), reference) < 0.005
-    monkeypatch.setattr(raycast.cache, "_SPLIT_FRACTION", 2.0)  # never split
+    monkeypatch.setattr(raycast.renderer.cache, "_SPLIT_FRACTION", 2.0)  # never split
     whole = SceneCache.build(scene, element_size_m=0.25)
     assert whole.n_elements < quartered.n_elements
     assert rms_mag(whole.intensity(sun, obs), reference) > 0.01
@@ -159,14 +163,14 @@ def test_smooth_glossy_cylinder_glint_matches_direct():
 
 @pytest.mark.parametrize("per_side", [1, 2, 3, 4])
 def test_edge_ray_points_cover_the_element_evenly(per_side):
-    from raycast.cache import _subpoint_weights
+    from raycast.renderer.cache import _subpoint_weights
 
     weights = _subpoint_weights(per_side)
     # k*k sub-triangle centroids: barycentric, inside, and centred on the element's centroid.
-    assert weights.shape == (per_side ** 2, 3)
+    assert weights.shape == (per_side**2, 3)
     assert np.allclose(weights.sum(axis=1), 1.0) and weights.min() > 0.0
     assert np.allclose(weights.mean(axis=0), 1.0 / 3.0, atol=1e-6)
-    assert len(np.unique(np.round(weights, 6), axis=0)) == per_side ** 2
+    assert len(np.unique(np.round(weights, 6), axis=0)) == per_side**2
 
 
 def test_edge_rays_per_side_is_checked():

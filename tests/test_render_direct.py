@@ -1,19 +1,20 @@
 """Renderers against exact answers: the Lambertian sphere, Lambert and GGX plates, convex facet sums.
 
-Each test runs over both implementations of `raycast.render.render` (direct ray casting and
+Each test runs over both implementations of `raycast.renderer.render` (direct ray casting and
 the cached fast path).
 """
-import math
+
 from collections import Counter
+import math
 
 import numpy as np
 import pytest
 
-from raycast.brdf import GGX, Lambertian, Principled
-from raycast.direct import DirectRenderer
 from raycast.models import topex
-from raycast.render import render
-from raycast.scene import Part, Scene
+from raycast.renderer.brdf import GGX, Lambertian, Principled
+from raycast.renderer.direct import DirectRenderer
+from raycast.renderer.methods import render
+from raycast.renderer.scene import Part, Scene
 from tests.conftest import MODELS
 from tests.render_support import METHODS, geometry, in_plane, unit
 
@@ -36,7 +37,7 @@ def test_lambertian_sphere_phase_law(sphere, method):
     # (5 mm: up to 0.36%, for the adaptive and the regular grid alike).
     model = render(sphere, geometry(sun, obs), method=method, pixel_size_m=0.0025)
     a = np.radians(phase)
-    exact = (2.0 / 3.0) * 1.0 ** 2 * 0.5 * (np.sin(a) + (np.pi - a) * np.cos(a)) / np.pi
+    exact = (2.0 / 3.0) * 1.0**2 * 0.5 * (np.sin(a) + (np.pi - a) * np.cos(a)) / np.pi
     # The issue's tolerance: 0.3% for phase angles 0-150 deg.
     np.testing.assert_allclose(model.intensity_m2_sr, exact, rtol=3e-3)
 
@@ -58,14 +59,14 @@ def test_lambert_plate_closed_form(method):
 
 def ggx_closed_form(color, roughness, incidence_deg, emergence_deg, azimuth_deg):
     """Blender's Glossy BSDF times cos(i) cos(e) A for a 1 m^2 plate, written out independently."""
-    alpha = roughness ** 2
+    alpha = roughness**2
     sun, obs = in_plane(incidence_deg, emergence_deg, azimuth_deg)
     h = unit(sun + obs)
     cos_i, cos_o, cos_h = sun[:, 2], obs[:, 2], h[:, 2]
-    d = alpha ** 2 / (np.pi * ((alpha ** 2 - 1.0) * cos_h ** 2 + 1.0) ** 2)
+    d = alpha**2 / (np.pi * ((alpha**2 - 1.0) * cos_h**2 + 1.0) ** 2)
 
     def lam(c):
-        return 0.5 * (np.sqrt(1.0 + alpha ** 2 * (1.0 / c ** 2 - 1.0)) - 1.0)
+        return 0.5 * (np.sqrt(1.0 + alpha**2 * (1.0 / c**2 - 1.0)) - 1.0)
 
     f = color * d / (1.0 + lam(cos_i) + lam(cos_o)) / (4.0 * cos_i * cos_o)
     return f * cos_i * cos_o
@@ -79,8 +80,9 @@ def test_ggx_plate_closed_form(method):
     sun, obs = in_plane(incidence, emergence, azimuth)
     # Roughness 0.3 (the paper's panels): alpha 0.09 is wide enough for one Sun sample.
     model = render(plate_scene(GGX(0.5, 0.3)), geometry(sun, obs), method=method, pixel_size_m=PLATE_PIXEL_M)
-    np.testing.assert_allclose(model.intensity_m2_sr, ggx_closed_form(0.5, 0.3, incidence, emergence, azimuth),
-                               rtol=1e-3)
+    np.testing.assert_allclose(
+        model.intensity_m2_sr, ggx_closed_form(0.5, 0.3, incidence, emergence, azimuth), rtol=1e-3
+    )
 
 
 @pytest.mark.parametrize("method", METHODS)
@@ -115,8 +117,10 @@ def test_repaired_paper_plate_is_a_two_sided_plate(method):
 
 def test_pixel_size_from_accuracy_meets_it():
     panel = Part.box("panel", (3.0, 2.0, 0.05), "cells").transformed(offset_m=(0.0, 0.0, 1.8))
-    scene = Scene.from_parts([Part.box("bus", (1.5, 1.5, 3.0), "paint"), panel],
-                             {"paint": Lambertian(0.6), "cells": Principled(0.1, roughness=0.4)})
+    scene = Scene.from_parts(
+        [Part.box("bus", (1.5, 1.5, 3.0), "paint"), panel],
+        {"paint": Lambertian(0.6), "cells": Principled(0.1, roughness=0.4)},
+    )
     rng = np.random.default_rng(3)
     sun = unit(rng.normal(size=(6, 3)) + [0, 0, 1.5])
     obs = unit(rng.normal(size=(6, 3)) + [0, 0, 1.5])
@@ -149,8 +153,9 @@ def test_tilted_shading_normal_keeps_diffuse_light_below_its_horizon(method):
     tilt = math.radians(40.0)
     n_s = np.array([math.sin(tilt), 0.0, math.cos(tilt)])
     corners = Part.plate("plate", 1.0, 1.0, "m").corners_m
-    scene = Scene.from_arrays(corners, np.broadcast_to(n_s, corners.shape).copy(), np.zeros(2, int),
-                              {"m": Lambertian(0.5)}, ["m"])
+    scene = Scene.from_arrays(
+        corners, np.broadcast_to(n_s, corners.shape).copy(), np.zeros(2, int), {"m": Lambertian(0.5)}, ["m"]
+    )
     sun = unit(np.array([[0.3, 0.1, 1.0]]))
     obs = unit(np.array([[-math.sin(math.radians(60.0)), 0.0, math.cos(math.radians(60.0))]]))
     assert obs[0] @ n_s < 0.0 < obs[0, 2]
@@ -163,11 +168,12 @@ def test_tilted_shading_normal_keeps_diffuse_light_below_its_horizon(method):
 def test_grid_skips_only_tiles_whose_hits_face_away_from_the_sun(monkeypatch):
     # A bus and a panel lit from behind the observer's side: many tiles hold only faces turned
     # away from the Sun. Skipping them must leave the sum exactly as the full grid's.
-    from raycast import direct
+    from raycast.renderer import direct
 
     panel = Part.box("panel", (3.0, 2.0, 0.05), "cells").transformed(offset_m=(0.0, 0.0, 1.8))
-    scene = Scene.from_parts([Part.box("bus", (1.5, 1.5, 3.0), "paint"), panel],
-                             {"paint": Lambertian(0.6), "cells": GGX(0.5, 0.3)})
+    scene = Scene.from_parts(
+        [Part.box("bus", (1.5, 1.5, 3.0), "paint"), panel], {"paint": Lambertian(0.6), "cells": GGX(0.5, 0.3)}
+    )
     rng = np.random.default_rng(8)
     sun, obs = unit(rng.normal(size=(6, 3))), unit(rng.normal(size=(6, 3)))
     counted = {}
@@ -193,7 +199,7 @@ def test_grid_skips_only_tiles_whose_hits_face_away_from_the_sun(monkeypatch):
 def _hit_table(renderer, sun, obs, monkeypatch):
     """The light curve, and a Counter of (frame, triangle) over the sunward first hits of the
     regular grid, found by rays (``sampling="grid"``) or by scan conversion (``"raster"``)."""
-    from raycast import _direct_kernels
+    from raycast.renderer import _direct_kernels
 
     recorded = Counter()
     name = "ray_hits" if renderer.sampling == "grid" else "raster_hits"
@@ -233,9 +239,13 @@ def test_scan_conversion_finds_the_same_first_hits_as_rays(model, monkeypatch):
     # COSMOS 2502's cross is two boxes whose faces overlap in one plane: there either face is
     # a first hit, so hits are compared per plane.
     mesh = scene.posed()
-    plane = np.unique(np.round(np.column_stack([mesh.face_normals, np.einsum("ij,ij->i", mesh.face_normals,
-                                                                               mesh.corners_m[:, 0])]), 6),
-                      axis=0, return_inverse=True)[1].ravel()
+    plane = np.unique(
+        np.round(
+            np.column_stack([mesh.face_normals, np.einsum("ij,ij->i", mesh.face_normals, mesh.corners_m[:, 0])]), 6
+        ),
+        axis=0,
+        return_inverse=True,
+    )[1].ravel()
     by_plane = [Counter(), Counter()]
     for table, counts in zip((by_rays, by_raster), by_plane):
         for (frame, triangle), count in table.items():
@@ -263,7 +273,7 @@ def test_scan_conversion_leaves_out_the_inner_sides_of_closed_parts_only():
 def test_hits_spared_a_shadow_ray_are_lit(monkeypatch):
     # TOPEX's parts are closed convex boxes (all but the dish): most sunlit hits need no shadow
     # ray. Sparing them must leave the light curve exactly as with every ray cast.
-    from raycast import _direct_kernels
+    from raycast.renderer import _direct_kernels
 
     scene = topex.build()
     rng = np.random.default_rng(3)
@@ -287,7 +297,7 @@ def test_hits_spared_a_shadow_ray_are_lit(monkeypatch):
 
 
 def test_convex_groups_are_closed_convex_parts():
-    from raycast.direct import convex_groups
+    from raycast.renderer.direct import convex_groups
 
     # A box and a sphere are closed and convex; a plate is open; a box with one corner pushed
     # inward is closed but dented. Each triangle outside a convex part is a group of its own.
@@ -296,8 +306,12 @@ def test_convex_groups_are_closed_convex_parts():
     corner = np.array([1.0, 0.5, 0.5])
     corners[np.all(np.isclose(corners, corner), axis=2)] = [0.6, 0.2, 0.2]
     dented = Part._flat("dented", corners, box.materials).transformed(offset_m=(0.0, 3.0, 0.0))
-    parts = [box, Part.sphere("ball", 0.5, "paint").transformed(offset_m=(3.0, 0.0, 0.0)),
-             Part.plate("sheet", 1.0, 1.0, "paint").transformed(offset_m=(0.0, 0.0, 3.0)), dented]
+    parts = [
+        box,
+        Part.sphere("ball", 0.5, "paint").transformed(offset_m=(3.0, 0.0, 0.0)),
+        Part.plate("sheet", 1.0, 1.0, "paint").transformed(offset_m=(0.0, 0.0, 3.0)),
+        dented,
+    ]
     mesh = Scene.from_parts(parts, {"paint": Lambertian(0.5)}).posed()
     inner = mesh.inner_sides()
     assert inner[mesh.part_index == 3].any(axis=1).all()  # the dented box is still closed
@@ -311,7 +325,7 @@ def test_convex_groups_are_closed_convex_parts():
 
 
 def test_render_scan_converts_small_meshes_and_samples_large_ones_adaptively(monkeypatch):
-    from raycast import render as render_module
+    from raycast.renderer import methods as render_module
 
     scene = topex.build()
     rng = np.random.default_rng(4)
@@ -320,11 +334,13 @@ def test_render_scan_converts_small_meshes_and_samples_large_ones_adaptively(mon
     monkeypatch.setattr(render_module, "RASTER_MAX_TRIANGLES", scene.n_triangles - 1)
     large = render(scene, geometry(sun, obs), method="direct", pixel_size_m=0.03)
     assert small.settings["sampling"] == "raster" and large.settings["sampling"] == "adaptive"
-    np.testing.assert_array_equal(small.intensity_m2_sr,
-                                  DirectRenderer(scene, 0.03, sampling="raster").intensity(sun, obs))
+    np.testing.assert_array_equal(
+        small.intensity_m2_sr, DirectRenderer(scene, 0.03, sampling="raster").intensity(sun, obs)
+    )
     lit = large.intensity_m2_sr > 0.0
     assert lit.sum() >= 3
     # Two samplings of one integral at 3 cm: within their edge errors (a few pixels' worth,
     # which is much of a frame that shows only a sliver).
-    np.testing.assert_allclose(small.intensity_m2_sr[lit], large.intensity_m2_sr[lit], rtol=0.02,
-                               atol=1e-3 * large.intensity_m2_sr.max())
+    np.testing.assert_allclose(
+        small.intensity_m2_sr[lit], large.intensity_m2_sr[lit], rtol=0.02, atol=1e-3 * large.intensity_m2_sr.max()
+    )

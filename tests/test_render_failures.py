@@ -1,20 +1,22 @@
 """Where rendering gets hard: grazing geometry, high phase, narrow glints, penumbra, degenerate
 meshes and bad input. Each gives finite correct output or a clear error, over both methods."""
+
 import math
 import warnings
 
 import numpy as np
 import pytest
 
-from raycast.brdf import GGX, Lambertian
-from raycast.direct import DirectRenderer
-from raycast.render import GlintUndersampledWarning, render
-from raycast.scene import Part, Scene
+from raycast.renderer.brdf import GGX, Lambertian
+from raycast.renderer.direct import DirectRenderer
+from raycast.renderer.methods import GlintUndersampledWarning, render
+from raycast.renderer.scene import Part, Scene
 from tests.conftest import MODELS
 from tests.render_support import METHODS, geometry, in_plane, unit
 
 
-def plate(brdf=Lambertian(0.6)):
+def plate(brdf=None):
+    brdf = Lambertian(0.6) if brdf is None else brdf
     return Scene.from_parts([Part.plate("plate", 1.0, 1.0, "m")], {"m": brdf})
 
 
@@ -47,8 +49,9 @@ def test_edge_on_and_back_lit_frames_are_exactly_dark(method):
     model = render(plate(), geometry(*in_plane(np.array([30.0]), np.array([90.0]))), method=method, pixel_size_m=0.01)
     # cos(90 deg) is 6e-17 in floating point: dark to rounding.
     assert 0.0 <= model.intensity_m2_sr[0] < 1e-15
-    dark = render(box, geometry(np.array([[0.0, 0.0, 1.0]]), np.array([[0.0, 0.0, -1.0]])), method=method,
-                  pixel_size_m=0.01)
+    dark = render(
+        box, geometry(np.array([[0.0, 0.0, 1.0]]), np.array([[0.0, 0.0, -1.0]])), method=method, pixel_size_m=0.01
+    )
     assert dark.intensity_m2_sr[0] == 0.0
     assert dark.mag[0] == np.inf  # documented: dark frames have infinite magnitude
 
@@ -77,8 +80,13 @@ def test_undersampled_glint_warns_with_the_fix():
     t = np.linspace(-0.1, 0.1, 4)  # four sub-samples of a 0.2 s exposure at 36 deg/s
     angle = np.radians(20.0 + 36.0 * t)
     sun = np.stack([np.sin(angle), 0 * angle, np.cos(angle)], axis=-1)[None]
-    obs = np.stack([-np.sin(np.radians(20.0)) + 0 * angle, 0 * angle, np.cos(np.radians(20.0)) + 0 * angle], axis=-1)[None]
-    with pytest.warns(GlintUndersampledWarning, match=r"glint of material 'm' is 0\.57 deg wide; compute the geometry with n_sub >= \d+"):
+    obs = np.stack([-np.sin(np.radians(20.0)) + 0 * angle, 0 * angle, np.cos(np.radians(20.0)) + 0 * angle], axis=-1)[
+        None
+    ]
+    with pytest.warns(
+        GlintUndersampledWarning,
+        match=r"glint of material 'm' is 0\.57 deg wide; compute the geometry with n_sub >= \d+",
+    ):
         render(scene, geometry(sun, obs), method="cached")
     fine = np.linspace(-0.1, 0.1, 40)
     angle = np.radians(20.0 + 36.0 * fine)
@@ -106,10 +114,13 @@ def test_flipped_normals_and_open_meshes(method):
     box = Part.box("box", (1.0, 2.0, 3.0), "m")
     corners = box.corners_m.copy()
     corners[::3] = corners[::3, ::-1]  # reverse the winding of every third triangle
-    flipped = Scene.from_arrays(corners, np.full_like(corners, np.nan), np.zeros(12, int), {"m": Lambertian(0.5)}, ["m"])
+    flipped = Scene.from_arrays(
+        corners, np.full_like(corners, np.nan), np.zeros(12, int), {"m": Lambertian(0.5)}, ["m"]
+    )
     good = Scene.from_parts([box], {"m": Lambertian(0.5)})
-    open_box = Scene.from_arrays(box.corners_m[2:], box.corner_normals[2:], np.zeros(10, int),
-                                 {"m": Lambertian(0.5)}, ["m"])  # the +x face removed: looking inside
+    open_box = Scene.from_arrays(
+        box.corners_m[2:], box.corner_normals[2:], np.zeros(10, int), {"m": Lambertian(0.5)}, ["m"]
+    )  # the +x face removed: looking inside
     rng = np.random.default_rng(8)
     sun, obs = unit(rng.normal(size=(6, 3))), unit(rng.normal(size=(6, 3)))
     sun[:, 0], obs[:, 0] = np.abs(sun[:, 0]), np.abs(obs[:, 0])  # lit and seen through the opening
@@ -123,8 +134,9 @@ def test_flipped_normals_and_open_meshes(method):
 
 def test_open_box_inner_walls_cache_equals_direct():
     box = Part.box("box", (1.0, 2.0, 3.0), "m")
-    open_box = Scene.from_arrays(box.corners_m[2:], box.corner_normals[2:], np.zeros(10, int),
-                                 {"m": Lambertian(0.5)}, ["m"])
+    open_box = Scene.from_arrays(
+        box.corners_m[2:], box.corner_normals[2:], np.zeros(10, int), {"m": Lambertian(0.5)}, ["m"]
+    )
     rng = np.random.default_rng(8)
     sun, obs = unit(rng.normal(size=(6, 3)) + [2, 0, 0]), unit(rng.normal(size=(6, 3)) + [2, 0, 0])
     direct = render(open_box, geometry(sun, obs), method="direct", pixel_size_m=0.005).intensity_m2_sr
@@ -139,12 +151,15 @@ def test_overlapping_faces_are_refused_with_the_fix():
         Scene.from_file(MODELS / "plate_1m.obj")
 
 
-@pytest.mark.parametrize("bad, message", [
-    (dict(sun=np.array([[0.0, 0.0, 2.0]])), "sun_body must hold finite unit vectors"),
-    (dict(sun=np.array([[np.nan, 0.0, 1.0]])), "sun_body must hold finite unit vectors"),
-    (dict(weights=np.array([0.5])), r"weights has shape \(1,\) and sum 0.5"),
-    (dict(sunlit=np.array([[1.5]])), r"sunlit has shape \(1, 1\); expected \(1, 1\) fractions in \[0, 1\]"),
-])
+@pytest.mark.parametrize(
+    "bad, message",
+    [
+        (dict(sun=np.array([[0.0, 0.0, 2.0]])), "sun_body must hold finite unit vectors"),
+        (dict(sun=np.array([[np.nan, 0.0, 1.0]])), "sun_body must hold finite unit vectors"),
+        (dict(weights=np.array([0.5])), r"weights has shape \(1,\) and sum 0.5"),
+        (dict(sunlit=np.array([[1.5]])), r"sunlit has shape \(1, 1\); expected \(1, 1\) fractions in \[0, 1\]"),
+    ],
+)
 def test_bad_geometry_messages(bad, message):
     g = geometry(np.array([[0.0, 0.0, 1.0]]), np.array([[0.0, 0.0, 1.0]]))
     if "sun" in bad:
@@ -170,8 +185,11 @@ def test_accuracy_out_of_reach_is_a_clear_error():
     scene = Scene.from_parts([Part.cylinder("tube", 1.0, 4.0, "gloss", segments=16)], {"gloss": GGX(0.5, 0.05)})
     sun = unit(np.array([[1.0, 0.2, 0.1]]))
     obs = unit(np.array([[0.3, 1.0, 0.1]]))
-    with pytest.raises(ValueError, match=r"accuracy_mag=0.0001 is out of reach for .* within max_pixels_per_frame=200000: "
-                       r"at [0-9.e-]+ m pixels two successive pixel sizes still differ by [0-9.e-]+ mag .*relax "
-                       r"accuracy_mag to at least [0-9.e-]+, raise max_pixels_per_frame to at least [0-9]+ for one "
-                       r"more halving, or give pixel_size_m directly"):
+    with pytest.raises(
+        ValueError,
+        match=r"accuracy_mag=0.0001 is out of reach for .* within max_pixels_per_frame=200000: "
+        r"at [0-9.e-]+ m pixels two successive pixel sizes still differ by [0-9.e-]+ mag .*relax "
+        r"accuracy_mag to at least [0-9.e-]+, raise max_pixels_per_frame to at least [0-9]+ for one "
+        r"more halving, or give pixel_size_m directly",
+    ):
         DirectRenderer.from_accuracy(scene, sun, obs, accuracy_mag=1e-4, max_pixels_per_frame=200_000)

@@ -1,19 +1,21 @@
-"""The direct renderer's adaptive sampling (raycast.refine) against its regular grid.
+"""The direct renderer's adaptive sampling (raycast.renderer.refine) against its regular grid.
 
 The regular grid with small pixels is the plain reference: the same rays, cast everywhere.
 The adaptive sampler must give the same light curve with far fewer rays, including for the
 cases its shortcuts could miss: parts and shadows narrower than its coarse cells, smooth
 shading, and the real models along the real TOPEX pass.
 """
+
 import numpy as np
 import pytest
 
-from raycast.attitude import PrecessingSpin
-from raycast.brdf import GGX, Lambertian
-from raycast.direct import DirectRenderer, orthonormal_basis
+from raycast.geometry.attitude import PrecessingSpin
 from raycast.models import topex
-from raycast.refine import coarse_levels
-from raycast.scene import Part, Scene
+from raycast.renderer.brdf import GGX, Lambertian
+from raycast.renderer.direct import DirectRenderer
+from raycast.renderer.rays import orthonormal_basis
+from raycast.renderer.refine import coarse_levels
+from raycast.renderer.scene import Part, Scene
 from tests.conftest import MODELS
 from tests.render_support import rms_mag, topex_pass_geometry, unit
 
@@ -45,7 +47,7 @@ def test_narrow_part_and_shadow_match_the_grid():
 
 
 def test_marks_kept_as_keys_give_the_same_result(monkeypatch):
-    import raycast.refine as refine
+    import raycast.renderer.refine as refine
 
     scene = rod_over_plate()
     sun, obs = directions()
@@ -56,7 +58,7 @@ def test_marks_kept_as_keys_give_the_same_result(monkeypatch):
 
 def test_without_edge_marks_the_narrow_rod_would_be_missed(monkeypatch):
     """The marks are what finds the rod: switched off, cells straddle it unseen."""
-    import raycast.refine as refine
+    import raycast.renderer.refine as refine
 
     scene = rod_over_plate()
     sun, obs = directions()

@@ -1,13 +1,14 @@
 """Scenes: mesh readers, materials, parts, articulations, degenerate meshes; photometry."""
+
 import math
 
 import numpy as np
 import pytest
 
-from raycast import photometry
-from raycast.brdf import GGX, Lambertian, Principled
 from raycast.models import cosmos2502, topex
-from raycast.scene import Part, Scene
+from raycast.renderer import photometry
+from raycast.renderer.brdf import GGX, Lambertian, Principled
+from raycast.renderer.scene import Part, Scene
 from tests.conftest import MODELS
 
 PAPER_OBJ = MODELS / "cosmos2502_lotos.obj"
@@ -58,9 +59,13 @@ def test_plate_with_overlapping_faces_is_refused_then_repaired():
 def test_zero_area_triangles_are_dropped():
     box = Part.box("box", (1.0, 2.0, 3.0), "m")
     sliver = np.array([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]]])
-    scene = Scene.from_arrays(np.concatenate([box.corners_m, sliver]),
-                              np.concatenate([box.corner_normals, np.full((1, 3, 3), np.nan)]),
-                              np.zeros(13, dtype=int), {"m": Lambertian(0.5)}, ["m"])
+    scene = Scene.from_arrays(
+        np.concatenate([box.corners_m, sliver]),
+        np.concatenate([box.corner_normals, np.full((1, 3, 3), np.nan)]),
+        np.zeros(13, dtype=int),
+        {"m": Lambertian(0.5)},
+        ["m"],
+    )
     assert scene.n_triangles == 12
     assert scene.area_m2 == pytest.approx(2 * (2 + 6 + 3), rel=1e-12)
     assert scene.notes == ("dropped 1 zero-area triangle(s)",)
@@ -94,7 +99,7 @@ def test_unknown_suffix_message(tmp_path):
 def test_obj_parse_error_names_line(tmp_path):
     path = tmp_path / "bad.obj"
     path.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n")
-    with pytest.raises(ValueError, match=r"bad.obj:4: index 7 is out of range"):
+    with pytest.raises(ValueError, match=r"bad.obj:4: vertex index 7 is outside the 3 vertices defined so far"):
         Scene.from_file(path, default_material=Lambertian(0.5))
 
 
@@ -125,7 +130,7 @@ def test_cosmos_lookalike_matches_paper_size(paper):
     look = cosmos2502.build()
     tube = look.part_index == look.part_names.index("tube")
     # Cylinder 3.5 m x 12 m: side area pi d L within the 48-gon's 0.3% deficit, plus two caps.
-    side = np.pi * 3.5 * 12.0 + 2 * np.pi * 1.75 ** 2
+    side = np.pi * 3.5 * 12.0 + 2 * np.pi * 1.75**2
     area = look.posed().areas_m2[tube].sum()
     assert area == pytest.approx(side, rel=4e-3)
     assert np.ptp(look.corners_m[..., 2]) == pytest.approx(np.ptp(paper.corners_m[..., 2]), abs=0.3)

@@ -4,6 +4,7 @@ Round-trip tolerances are half a unit of the last printed digit: magnitudes 0.00
 flux 5e-5, angles and range 5e-4; times are exact in the UT variant for millisecond times
 (ccd_phot prints ms) and within one float64 step of the JD (40 us) in the JD variant.
 """
+
 from __future__ import annotations
 
 import re
@@ -18,8 +19,15 @@ from tests.conftest import COSMOS2540_PHV, COSMOS2553_JD_PHV, COSMOS2553_PHC, RE
 # ccd_phot prints the JD as the shortest repr of a float64, whose step near JD 2.46e6 is 2**-31 day
 # = 40.2 us: the float is within half a step of the time, its shortest repr within half a step of the float.
 JD_STEP_NS = 40_234
-PRINTED = {"mag": 5e-4, "mag_err": 5e-4, "flux": 5e-5, "flux_err": 5e-5, "az_deg": 5e-4, "el_deg": 5e-4,
-           "range_km": 5e-4}
+PRINTED = {
+    "mag": 5e-4,
+    "mag_err": 5e-4,
+    "flux": 5e-5,
+    "flux_err": 5e-5,
+    "az_deg": 5e-4,
+    "el_deg": 5e-4,
+    "range_km": 5e-4,
+}
 
 
 def assert_same_pass(a, b, time_tolerance_ns):
@@ -28,8 +36,15 @@ def assert_same_pass(a, b, time_tolerance_ns):
     for name, tolerance in PRINTED.items():
         np.testing.assert_allclose(getattr(a, name), getattr(b, name), rtol=0, atol=tolerance, err_msg=name)
     assert np.array_equal(a.saturated, b.saturated) and np.array_equal(a.valid, b.valid)
-    assert (a.norad, a.name, a.cospar, a.band, a.site, a.exposure_s, a.tle) == \
-        (b.norad, b.name, b.cospar, b.band, b.site, b.exposure_s, b.tle)
+    assert (a.norad, a.name, a.cospar, a.band, a.site, a.exposure_s, a.tle) == (
+        b.norad,
+        b.name,
+        b.cospar,
+        b.band,
+        b.site,
+        b.exposure_s,
+        b.tle,
+    )
 
 
 @pytest.mark.parametrize("variant", ["ut", "jd"])

@@ -1,4 +1,4 @@
-"""Draw the attitude conventions of raycast.attitude into docs/img/attitude_conventions.png.
+"""Draw the attitude conventions of raycast.geometry.attitude into docs/img/attitude_conventions.png.
 
 Every vector drawn is computed by the attitude models themselves, so the figure shows what the
 code does: run ``python docs/figures/attitude_conventions.py`` after changing a convention.
@@ -6,6 +6,7 @@ code does: run ``python docs/figures/attitude_conventions.py`` after changing a 
 Left: `PrecessingSpin` in the local orbital frame (LVLH: x along-track, y = -orbit normal,
 z = nadir). Right: `InertialSpin` in GCRS (IAU convention: node = z x pole, W from the node).
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -16,7 +17,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from raycast.attitude import InertialSpin, PrecessingSpin  # noqa: E402
+from raycast.geometry.attitude import InertialSpin, PrecessingSpin  # noqa: E402
 
 OUTPUT = Path(__file__).resolve().parents[1] / "img" / "attitude_conventions.png"
 
@@ -39,18 +40,29 @@ def arc(ax, start, end, radius, color, label, steps=40):
 
 def precessing_panel(ax):
     theta_deg, phi_deg = 35.0, 50.0
-    model = PrecessingSpin(period_s=10.0, phase_deg=0.0, precession_phase_deg=phi_deg,
-                           precession_angle_deg=theta_deg, spin_axis="z")
+    model = PrecessingSpin(
+        period_s=10.0, phase_deg=0.0, precession_phase_deg=phi_deg, precession_angle_deg=theta_deg, spin_axis="z"
+    )
     rotation = model.orientation(np.zeros(1), np.eye(3)[None])[0]  # body axes in LVLH
     spin, reference = rotation[:, 2], rotation[:, 0]
     ex, ey, ez = np.eye(3)
-    for vector, name in ((ex, "x: along-track\n(direction of motion)"), (ey, "y: -orbit normal"),
-                         (ez, "z: nadir (to Earth centre)")):
+    for vector, name in (
+        (ex, "x: along-track\n(direction of motion)"),
+        (ey, "y: -orbit normal"),
+        (ez, "z: nadir (to Earth centre)"),
+    ):
         arrow(ax, vector, "0.35", name)
     # The precession cone around nadir.
     a = np.linspace(0, 2 * np.pi, 90)
     th = np.radians(theta_deg)
-    ax.plot(np.sin(th) * np.cos(a), np.sin(th) * np.sin(a), np.full_like(a, np.cos(th)), color="tab:blue", linewidth=0.8, linestyle=":")
+    ax.plot(
+        np.sin(th) * np.cos(a),
+        np.sin(th) * np.sin(a),
+        np.full_like(a, np.cos(th)),
+        color="tab:blue",
+        linewidth=0.8,
+        linestyle=":",
+    )
     arrow(ax, spin, "tab:blue", "spin axis s3\n(body 'z' here)")
     arrow(ax, reference, "tab:red", "reference axis s1 at psi = 0\n(body 'x' when spin_axis='z')")
     arc(ax, ez, spin, 0.55, "tab:blue", "theta")
@@ -61,12 +73,20 @@ def precessing_panel(ax):
     a = np.linspace(-0.75, 0.75, 60)
     ax.plot(0 * a, 2.0 * np.sin(a), 1.3 + 2.0 * (1 - np.cos(a)), color="tab:brown", linewidth=2)
     ax.text(0.0, 0.15, 1.45, "Earth", color="tab:brown", fontsize=10)
-    ax.text2D(0.02, 0.02, "theta: cone half-angle (spin axis to nadir)\n"
-              "phi: azimuth of the spin axis about nadir, from +x toward +y\n"
-              "psi: spin angle; at psi = 0 the reference axis lies in the\n"
-              "plane of nadir and spin axis, on the side away from the Earth",
-              transform=ax.transAxes, fontsize=8.5)
-    ax.set_title("PrecessingSpin: R = LVLH Rz(phi) Ry(theta) Rz(psi)\nphi = phi0 + 360 t / P_pr,  psi = psi0 + 360 t / P", fontsize=10)
+    ax.text2D(
+        0.02,
+        0.02,
+        "theta: cone half-angle (spin axis to nadir)\n"
+        "phi: azimuth of the spin axis about nadir, from +x toward +y\n"
+        "psi: spin angle; at psi = 0 the reference axis lies in the\n"
+        "plane of nadir and spin axis, on the side away from the Earth",
+        transform=ax.transAxes,
+        fontsize=8.5,
+    )
+    ax.set_title(
+        "PrecessingSpin: R = LVLH Rz(phi) Ry(theta) Rz(psi)\nphi = phi0 + 360 t / P_pr,  psi = psi0 + 360 t / P",
+        fontsize=10,
+    )
 
 
 def inertial_panel(ax):
@@ -80,8 +100,12 @@ def inertial_panel(ax):
     a = np.linspace(0, 2 * np.pi, 120)
     ax.plot(np.cos(a), np.sin(a), 0 * a, color="0.6", linewidth=0.6)  # celestial equator
     second = np.cross(pole, node)
-    ax.plot(*(0.8 * (np.outer(np.cos(a), node) + np.outer(np.sin(a), second))).T, color="tab:blue",
-            linewidth=0.6, linestyle=":")  # the body's equator
+    ax.plot(
+        *(0.8 * (np.outer(np.cos(a), node) + np.outer(np.sin(a), second))).T,
+        color="tab:blue",
+        linewidth=0.6,
+        linestyle=":",
+    )  # the body's equator
     arrow(ax, pole, "tab:blue", "pole (ra, dec): spin axis")
     arrow(ax, node, "tab:purple", "node = Z x pole (W = 0)")
     arrow(ax, reference, "tab:red", "reference axis at W")
@@ -89,9 +113,15 @@ def inertial_panel(ax):
     arc(ax, ex, equator_point, 0.5, "tab:green", "ra")
     arc(ax, equator_point, pole, 0.6, "tab:green", "dec")
     arc(ax, node, reference, 0.8, "tab:red", "W")
-    ax.text2D(0.02, 0.02, "pole at (ra, dec) in GCRS; W = W0 + 360 t / P measured from the node\n"
-              "(ascending node of the body's equator on the ICRF equator, RA = ra + 90)\n"
-              "counterclockwise about the pole to the reference axis", transform=ax.transAxes, fontsize=8.5)
+    ax.text2D(
+        0.02,
+        0.02,
+        "pole at (ra, dec) in GCRS; W = W0 + 360 t / P measured from the node\n"
+        "(ascending node of the body's equator on the ICRF equator, RA = ra + 90)\n"
+        "counterclockwise about the pole to the reference axis",
+        transform=ax.transAxes,
+        fontsize=8.5,
+    )
     ax.set_title("InertialSpin (IAU): R = Rz(ra + 90) Rx(90 - dec) Rz(W)", fontsize=10)
 
 
@@ -109,8 +139,14 @@ def main() -> Path:
             ax.view_init(elev=22, azim=35)
         ax.set_box_aspect((1, 1, 1))
         ax.set_axis_off()
-    figure.text(0.5, 0.02, "Positive periods turn right-handedly about the +axis; spin_axis 'x' or 'y' relabels body "
-                "axes cyclically (s3 = spin axis, s1 = next axis: z->x, x->y, y->z).", ha="center", fontsize=9)
+    figure.text(
+        0.5,
+        0.02,
+        "Positive periods turn right-handedly about the +axis; spin_axis 'x' or 'y' relabels body "
+        "axes cyclically (s3 = spin axis, s1 = next axis: z->x, x->y, y->z).",
+        ha="center",
+        fontsize=9,
+    )
     figure.tight_layout()
     OUTPUT.parent.mkdir(parents=True, exist_ok=True)
     figure.savefig(OUTPUT, dpi=110)

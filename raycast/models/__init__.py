@@ -1,8 +1,9 @@
 """Models built by code: TOPEX/Poseidon and a COSMOS 2502 look-alike.
 
 ``MODELS`` maps a model name to its ``build(**parameters) -> Scene``; the paper's own COSMOS
-2502 mesh is read from ../shared/data/models with :meth:`raycast.scene.Scene.from_file`.
+2502 mesh is read from ../shared/data/models with :meth:`raycast.renderer.scene.Scene.from_file`.
 """
+
 from raycast.models import cosmos2502, topex
 
 MODELS = {"topex": topex.build, "cosmos2502": cosmos2502.build}

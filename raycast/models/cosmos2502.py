@@ -7,10 +7,11 @@ perpendicular to the tube near its +Z end, reaching out along +-X, and a cross o
 the tube a Principled dielectric of base colour 0.359, the panel cells Blender Glossy of colour
 0.076 and roughness 0.3, panel backs and tube ends a dark Principled (0.064), the cross 0.163.
 """
+
 from __future__ import annotations
 
-from raycast.brdf import GGX, Principled
-from raycast.scene import Part, Scene
+from raycast.renderer.brdf import GGX, Principled
+from raycast.renderer.scene import Part, Scene
 
 __all__ = ["build", "MATERIALS"]
 
@@ -32,9 +33,18 @@ def build(materials: dict | None = None, segments: int = 48) -> Scene:
     """
     brdfs = {**MATERIALS, **(materials or {})}
     tube = Part.cylinder("tube", 1.75, 12.0, "body_1", segments=segments, cap_material="body_2")
-    panels = [Part.box(f"panel_{side}", (4.0, 7.0, 0.19), "body_2", center_m=(sign * 3.85, 0.0, 5.7),
-                       face_materials={"+z": "spb_2"})
-              for side, sign in (("plus_x", 1.0), ("minus_x", -1.0))]
-    cross = [Part.box("cross_x", (5.5, 0.6, 0.12), "b_cross", center_m=(0.0, 0.0, -5.92)),
-             Part.box("cross_y", (0.6, 5.5, 0.12), "b_cross", center_m=(0.0, 0.0, -5.92))]
+    panels = [
+        Part.box(
+            f"panel_{side}",
+            (4.0, 7.0, 0.19),
+            "body_2",
+            center_m=(sign * 3.85, 0.0, 5.7),
+            face_materials={"+z": "spb_2"},
+        )
+        for side, sign in (("plus_x", 1.0), ("minus_x", -1.0))
+    ]
+    cross = [
+        Part.box("cross_x", (5.5, 0.6, 0.12), "b_cross", center_m=(0.0, 0.0, -5.92)),
+        Part.box("cross_y", (0.6, 5.5, 0.12), "b_cross", center_m=(0.0, 0.0, -5.92)),
+    ]
     return Scene.from_parts([tube, *panels, *cross], brdfs, name="cosmos2502")

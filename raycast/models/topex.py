@@ -18,12 +18,13 @@ Body frame: +Z is the long (former yaw) axis, the high-gain antenna at +Z; the s
 leaves the bus along +Y; at ``panel_pitch_deg = 0`` the cells face +X, and the pitch rotates
 the array about the boom axis (+Y, right-hand rule).
 """
+
 from __future__ import annotations
 
 import numpy as np
 
-from raycast.brdf import GGX, Lambertian
-from raycast.scene import Articulation, Part, Scene
+from raycast.renderer.brdf import GGX, Lambertian
+from raycast.renderer.scene import Articulation, Part, Scene
 
 __all__ = ["build", "MATERIALS", "ARRAY_SIZE_M", "ENVELOPE_M"]
 
@@ -53,20 +54,39 @@ def build(panel_pitch_deg: float = 12.0, materials: dict | None = None) -> Scene
     brdfs = {**MATERIALS, **(materials or {})}
     width_x, depth_y, height_z = ENVELOPE_M
     # Instrument module (lower, full width) and multimission bus (upper, narrower).
-    module = Part.box("instrument_module", (width_x, depth_y, 3.4), "mli_foil", center_m=(0.0, 0.0, -1.6),
-                      face_materials={"+x": "radiator"})
-    bus = Part.box("bus", (2.8, depth_y, 3.2), "mli_foil", center_m=(-1.35, 0.0, 1.7),
-                   face_materials={"-x": "radiator"})
+    module = Part.box(
+        "instrument_module",
+        (width_x, depth_y, 3.4),
+        "mli_foil",
+        center_m=(0.0, 0.0, -1.6),
+        face_materials={"+x": "radiator"},
+    )
+    bus = Part.box(
+        "bus", (2.8, depth_y, 3.2), "mli_foil", center_m=(-1.35, 0.0, 1.7), face_materials={"-x": "radiator"}
+    )
     mast = Part.box("mast", (0.15, 0.15, 1.0), "boom", center_m=(-1.35, 0.0, 3.3 + 0.5))
     dish = Part.dish("antenna", 1.5, 0.25, "antenna").transformed(offset_m=(-1.35, 0.0, 4.3))
     boom_root = np.array([-1.35, depth_y / 2.0, 2.4])
-    boom = Part.box("boom", (0.1, BOOM_LENGTH_M, 0.1), "boom",
-                    center_m=boom_root + [0.0, BOOM_LENGTH_M / 2.0, 0.0])
+    boom = Part.box("boom", (0.1, BOOM_LENGTH_M, 0.1), "boom", center_m=boom_root + [0.0, BOOM_LENGTH_M / 2.0, 0.0])
     length, width = ARRAY_SIZE_M
-    array = Part.box("solar_array", (ARRAY_THICKNESS_M, length, width), "array_back",
-                     center_m=boom_root + [0.0, BOOM_LENGTH_M + length / 2.0, 0.0],
-                     face_materials={"+x": "solar_cells"})
-    articulation = Articulation(part="solar_array", parameter="panel_pitch_deg",
-                                axis_point_m=tuple(boom_root), axis=(0.0, 1.0, 0.0), rest_deg=0.0)
-    return Scene.from_parts([module, bus, mast, dish, boom, array], brdfs, articulations=[articulation],
-                            parameters={"panel_pitch_deg": panel_pitch_deg}, name="topex")
+    array = Part.box(
+        "solar_array",
+        (ARRAY_THICKNESS_M, length, width),
+        "array_back",
+        center_m=boom_root + [0.0, BOOM_LENGTH_M + length / 2.0, 0.0],
+        face_materials={"+x": "solar_cells"},
+    )
+    articulation = Articulation(
+        part="solar_array",
+        parameter="panel_pitch_deg",
+        axis_point_m=tuple(boom_root),
+        axis=(0.0, 1.0, 0.0),
+        rest_deg=0.0,
+    )
+    return Scene.from_parts(
+        [module, bus, mast, dish, boom, array],
+        brdfs,
+        articulations=[articulation],
+        parameters={"panel_pitch_deg": panel_pitch_deg},
+        name="topex",
+    )

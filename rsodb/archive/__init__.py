@@ -8,11 +8,19 @@
 The layout (readable with plain h5py and pandas) is described in `rsodb.archive.layout` and
 docs/archive.md.
 """
-from rsodb.archive.report import CommitEvent, IngestedFile, IngestReport
-from rsodb.archive.store import Archive, PendingFile, UnknownPassError
+
+from rsodb.archive.ingest_report import CommitEvent, IngestedFile, IngestReport, PendingFile
+from rsodb.archive.store import Archive, UnknownPassError
 from rsodb.archive.stored import ArchivedObject, PassSummary, StoredPass
 
 __all__ = [
-    "Archive", "StoredPass", "PassSummary", "ArchivedObject", "IngestReport", "IngestedFile",
-    "CommitEvent", "PendingFile", "UnknownPassError",
+    "Archive",
+    "StoredPass",
+    "PassSummary",
+    "ArchivedObject",
+    "IngestReport",
+    "IngestedFile",
+    "CommitEvent",
+    "PendingFile",
+    "UnknownPassError",
 ]

@@ -7,12 +7,13 @@ Hidden files and directories are skipped. Symbolic links are followed, but each 
 entered once, so a link loop ends the walk instead of hanging it, and a file reached twice is
 listed once.
 """
+
 from __future__ import annotations
 
+from collections.abc import Iterable
 import os
-import re
 from pathlib import Path
-from typing import Iterable
+import re
 
 from ingest.errors import FormatError
 

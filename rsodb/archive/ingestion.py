@@ -8,21 +8,25 @@ every `commit_interval_s` seconds, but never sooner than `_COMMIT_SPACING` times
 its previous commit (so commits take at most ~1/(1 + spacing) of the wall time however large the
 objects grow), and whenever the passes waiting in memory exceed `_MAX_PENDING_BYTES`.
 """
+
 from __future__ import annotations
 
+from collections import deque
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
 import hashlib
 import multiprocessing
 import os
-import time
-from collections import deque
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable
+import time
+from typing import TYPE_CHECKING
+
+from tqdm import tqdm
 
 from ingest.errors import FormatError
+from ingest.readers import read_file
 from rsodb.archive.discovery import find_observation_files
-from rsodb.archive.report import CommitEvent, IngestReport
-from rsodb.archive.store import PendingFile
+from rsodb.archive.ingest_report import CommitEvent, IngestReport, PendingFile
 
 if TYPE_CHECKING:
     from rsodb.archive.store import Archive
@@ -64,8 +68,6 @@ def read_observation_file(path: str, known_sha256: frozenset[str] = frozenset())
             return path, "", None, FormatError(path, None, f"cannot read ({exc.strerror or exc})")
         if sha in known_sha256:
             return path, sha, None, None
-    from ingest import read_file
-
     try:
         passes = tuple(read_file(path))
     except FormatError as exc:
@@ -77,8 +79,11 @@ def read_observation_file(path: str, known_sha256: frozenset[str] = frozenset())
     except (ValueError, UnicodeError) as exc:
         return path, sha, None, FormatError(path, None, str(exc) or type(exc).__name__)
     except Exception as exc:  # a reader bug must not stop the batch; it is reported, not hidden
-        return path, sha, None, FormatError(
-            path, None, f"unexpected {type(exc).__name__} in the reader ({exc}); please report this file"
+        return (
+            path,
+            sha,
+            None,
+            FormatError(path, None, f"unexpected {type(exc).__name__} in the reader ({exc}); please report this file"),
         )
     if not passes:
         return path, sha, None, FormatError(path, None, "the file holds no light curve")
@@ -102,15 +107,16 @@ def _results(files: list[Path], known: frozenset[str], workers: int):
         for path in paths:
             yield read_observation_file(path, known)
         return
-    chunks = [paths[i:i + _CHUNK_FILES] for i in range(0, len(paths), _CHUNK_FILES)]
+    chunks = [paths[i : i + _CHUNK_FILES] for i in range(0, len(paths), _CHUNK_FILES)]
     # Read far enough ahead that the readers keep parsing while the parent commits (a commit
     # round over 50 objects takes up to seconds late in a large ingest); ~50 MB of 2500-row passes.
     window = _READ_AHEAD_CHUNKS_PER_WORKER * workers
     # Spawned, not forked: a fork taken while another thread of this process holds a lock (an
     # Embree or BLAS pool, a logging handler) can leave the reader waiting on it forever.
     context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_init_worker,
-                             initargs=(known,)) as pool:
+    with ProcessPoolExecutor(
+        max_workers=workers, mp_context=context, initializer=_init_worker, initargs=(known,)
+    ) as pool:
         queued = deque()
         next_chunk = 0
         try:
@@ -124,9 +130,15 @@ def _results(files: list[Path], known: frozenset[str], workers: int):
                 future.cancel()
 
 
-def run_ingest(archive: "Archive", paths: list, *, progress: bool = True, workers: int | None = None,
-               on_commit: Callable[[CommitEvent], None] | None = None,
-               commit_interval_s: float = 1.0) -> IngestReport:
+def run_ingest(
+    archive: Archive,
+    paths: list,
+    *,
+    progress: bool = True,
+    workers: int | None = None,
+    on_commit: Callable[[CommitEvent], None] | None = None,
+    commit_interval_s: float = 1.0,
+) -> IngestReport:
     """Implementation of `Archive.ingest` (see there)."""
     if workers is not None and (not isinstance(workers, int) or workers < 0):
         raise ValueError(f"workers={workers!r} must be a non-negative integer (0 reads in this process)")
@@ -161,8 +173,6 @@ def run_ingest(archive: "Archive", paths: list, *, progress: bool = True, worker
         last_commit_end = time.monotonic()
         last_commit_cost = last_commit_end - began
 
-    from tqdm import tqdm
-
     with tqdm(total=len(files), disable=not progress, unit="file", desc="ingest", dynamic_ncols=True) as bar:
         for path, sha, passes, error in _results(files, known, workers):
             bar.update(1)
@@ -179,8 +189,10 @@ def run_ingest(archive: "Archive", paths: list, *, progress: bool = True, worker
                     pending.setdefault(norad, []).append(PendingFile(path, sha, tuple(object_passes)))
                 pending_bytes += sum(pass_.time_utc.nbytes * 11 for pass_ in passes)
             since = time.monotonic() - last_commit_end
-            if pending and (pending_bytes > _MAX_PENDING_BYTES
-                            or since >= max(commit_interval_s, _COMMIT_SPACING * last_commit_cost)):
+            if pending and (
+                pending_bytes > _MAX_PENDING_BYTES
+                or since >= max(commit_interval_s, _COMMIT_SPACING * last_commit_cost)
+            ):
                 commit_pending()
             if progress:
                 bar.set_postfix(committed=len(ingested), present=len(present), failed=len(failed), refresh=False)
@@ -189,5 +201,9 @@ def run_ingest(archive: "Archive", paths: list, *, progress: bool = True, worker
 
     order = {str(path): i for i, path in enumerate(files)}
     ingested.sort(key=lambda item: order.get(item.path, len(order)))
-    return IngestReport(ingested=tuple(ingested), already_present=tuple(present), failed=tuple(failed),
-                        elapsed_s=time.monotonic() - started)
+    return IngestReport(
+        ingested=tuple(ingested),
+        already_present=tuple(present),
+        failed=tuple(failed),
+        elapsed_s=time.monotonic() - started,
+    )

@@ -22,24 +22,42 @@ and one object file holds (all names below are literal HDF5 paths)::
 
 docs/archive.md is the reader's guide to this layout.
 """
+
 from __future__ import annotations
 
 import dataclasses
 import hashlib
 import json
-from typing import Mapping
 
 import h5py
 import numpy as np
 
-from ingest.observation import ARRAY_FIELDS, Pass, Reduction
-from raycast.site import Site
+from ingest.observation import ARRAY_FIELDS, Pass
+from ingest.reduction import Reduction
+from ingest.site import Site
 from rsodb.archive.stored import PassSummary, StoredPass
+from rsodb.storage import attr_text, to_json
 
 __all__ = [
-    "SCHEMA_VERSION", "FORMAT_NAME", "MARKER_NAME", "OBJECTS_DIR", "CHAINS_DIR", "RESULT_KINDS",
-    "TIME_UNITS", "object_file_name", "lock_file_name", "natural_pass_id", "versioned_pass_id",
-    "samples_table", "content_sha256", "pass_metadata", "write_pass", "write_file_attributes", "read_pass", "write_catalog", "read_catalog",
+    "SCHEMA_VERSION",
+    "FORMAT_NAME",
+    "MARKER_NAME",
+    "OBJECTS_DIR",
+    "CHAINS_DIR",
+    "RESULT_KINDS",
+    "TIME_UNITS",
+    "object_file_name",
+    "lock_file_name",
+    "natural_pass_id",
+    "versioned_pass_id",
+    "samples_table",
+    "content_sha256",
+    "pass_metadata",
+    "write_pass",
+    "write_file_attributes",
+    "read_pass",
+    "write_catalog",
+    "read_catalog",
     "check_schema",
 ]
 
@@ -53,19 +71,42 @@ TIME_UNITS = "ns since 1970-01-01T00:00:00 UTC (POSIX: leap seconds not counted)
 
 # Units of the sample columns, written once per samples table so the file explains itself.
 SAMPLE_UNITS = {
-    "time_utc": TIME_UNITS, "mag": "mag", "mag_err": "mag", "flux": "counts per exposure",
-    "flux_err": "counts per exposure", "az_deg": "deg", "el_deg": "deg (refraction included)",
-    "range_km": "km", "saturated": "bool", "valid": "bool", "mag_corrected": "mag",
+    "time_utc": TIME_UNITS,
+    "mag": "mag",
+    "mag_err": "mag",
+    "flux": "counts per exposure",
+    "flux_err": "counts per exposure",
+    "az_deg": "deg",
+    "el_deg": "deg (refraction included)",
+    "range_km": "km",
+    "saturated": "bool",
+    "valid": "bool",
+    "mag_corrected": "mag",
 }
 
 _STR = h5py.string_dtype("utf-8")
-CATALOG_DTYPE = np.dtype([
-    ("pass_id", _STR), ("lineage_id", _STR), ("natural_id", _STR), ("version", "<i4"),
-    ("supersedes", _STR), ("superseded_by", _STR), ("norad", "<i8"), ("name", _STR),
-    ("band", _STR), ("site", _STR), ("start_utc", "<i8"), ("end_utc", "<i8"),
-    ("n_points", "<i8"), ("exposure_s", "<f8"), ("source_name", _STR), ("source_sha256", _STR),
-    ("source_format", _STR), ("ingested_utc", _STR),
-])
+CATALOG_DTYPE = np.dtype(
+    [
+        ("pass_id", _STR),
+        ("lineage_id", _STR),
+        ("natural_id", _STR),
+        ("version", "<i4"),
+        ("supersedes", _STR),
+        ("superseded_by", _STR),
+        ("norad", "<i8"),
+        ("name", _STR),
+        ("band", _STR),
+        ("site", _STR),
+        ("start_utc", "<i8"),
+        ("end_utc", "<i8"),
+        ("n_points", "<i8"),
+        ("exposure_s", "<f8"),
+        ("source_name", _STR),
+        ("source_sha256", _STR),
+        ("source_format", _STR),
+        ("ingested_utc", _STR),
+    ]
+)
 
 
 def object_file_name(norad: int) -> str:
@@ -92,8 +133,9 @@ def versioned_pass_id(lineage_id: str, version: int) -> str:
 
 # -- samples -------------------------------------------------------------------------------
 def _samples_dtype(with_corrected: bool) -> np.dtype:
-    fields = [(name, "<i8" if dtype.startswith("datetime64") else np.dtype(dtype).str)
-              for name, dtype in ARRAY_FIELDS.items()]
+    fields = [
+        (name, "<i8" if dtype.startswith("datetime64") else np.dtype(dtype).str) for name, dtype in ARRAY_FIELDS.items()
+    ]
     if with_corrected:
         fields.append(("mag_corrected", "<f8"))
     return np.dtype(fields)
@@ -119,40 +161,53 @@ def content_sha256(pass_: Pass) -> str:
 
 
 # -- metadata ------------------------------------------------------------------------------
-def _jsonable(value):
-    """JSON encoder hook for the few non-JSON types a header may carry."""
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, (tuple, set, frozenset)):
-        return list(value)
-    if isinstance(value, Mapping):
-        return dict(value)
-    raise TypeError(f"header value {value!r} of type {type(value).__name__} cannot be stored as JSON")
-
-
-def pass_metadata(pass_: Pass, *, pass_id: str, lineage_id: str, natural_id: str, version: int,
-                  supersedes: str | None, ingested_utc: str) -> dict:
+def pass_metadata(
+    pass_: Pass,
+    *,
+    pass_id: str,
+    lineage_id: str,
+    natural_id: str,
+    version: int,
+    supersedes: str | None,
+    ingested_utc: str,
+) -> dict:
     """Everything about a pass except its per-sample arrays, as a JSON-ready dict."""
     reduction = pass_.reduction
     return {
-        "pass_id": pass_id, "lineage_id": lineage_id, "natural_id": natural_id, "version": version,
-        "supersedes": supersedes, "ingested_utc": ingested_utc,
-        "norad": int(pass_.norad), "name": pass_.name, "cospar": pass_.cospar, "band": pass_.band,
-        "site": {"name": pass_.site.name, "lat_deg": pass_.site.lat_deg, "lon_deg": pass_.site.lon_deg,
-                 "elevation_m": pass_.site.elevation_m},
+        "pass_id": pass_id,
+        "lineage_id": lineage_id,
+        "natural_id": natural_id,
+        "version": version,
+        "supersedes": supersedes,
+        "ingested_utc": ingested_utc,
+        "norad": int(pass_.norad),
+        "name": pass_.name,
+        "cospar": pass_.cospar,
+        "band": pass_.band,
+        "site": {
+            "name": pass_.site.name,
+            "lat_deg": pass_.site.lat_deg,
+            "lon_deg": pass_.site.lon_deg,
+            "elevation_m": pass_.site.elevation_m,
+        },
         "exposure_s": float(pass_.exposure_s),
         "n_points": len(pass_),
         "start_utc": np.datetime_as_string(pass_.start_utc, unit="ns") + "Z",
         "end_utc": np.datetime_as_string(pass_.end_utc, unit="ns") + "Z",
-        "time_convention": pass_.time_convention, "time_shift_s": float(pass_.time_shift_s),
+        "time_convention": pass_.time_convention,
+        "time_shift_s": float(pass_.time_shift_s),
         "mag_convention": pass_.mag_convention,
         "tle": list(pass_.tle) if pass_.tle is not None else None,
         "omm": dict(pass_.omm) if pass_.omm is not None else None,
-        "source_name": pass_.source_name, "source_sha256": pass_.source_sha256,
+        "source_name": pass_.source_name,
+        "source_sha256": pass_.source_sha256,
         "source_format": pass_.source_format,
-        "reduction": None if reduction is None else {
+        "reduction": None
+        if reduction is None
+        else {
             name: (value.item() if isinstance(value, np.generic) else value)
-            for name, value in dataclasses.asdict(reduction).items()},
+            for name, value in dataclasses.asdict(reduction).items()
+        },
         "header": dict(pass_.header),
     }
 
@@ -176,7 +231,7 @@ def _create_table(group: h5py.Group, name: str, table: np.ndarray) -> None:
 def write_pass(passes_group: h5py.Group, pass_: Pass, metadata: dict) -> None:
     """Create ``passes_group[metadata['pass_id']]`` holding the pass's samples and metadata."""
     group = passes_group.create_group(metadata["pass_id"])
-    group.attrs["metadata"] = json.dumps(metadata, default=_jsonable, ensure_ascii=False)
+    group.attrs["metadata"] = to_json(metadata)
     _create_table(group, "samples", samples_table(pass_))
 
 
@@ -196,19 +251,30 @@ def read_pass(group: h5py.Group, superseded_by: str | None = None) -> StoredPass
     arrays = {name: np.ascontiguousarray(table[name]) for name in ARRAY_FIELDS if name != "time_utc"}
     reduction = meta["reduction"]
     return StoredPass(
-        norad=meta["norad"], name=meta["name"], band=meta["band"], site=Site(**meta["site"]),
-        exposure_s=meta["exposure_s"], time_utc=table["time_utc"].astype("datetime64[ns]"),
+        norad=meta["norad"],
+        name=meta["name"],
+        band=meta["band"],
+        site=Site(**meta["site"]),
+        exposure_s=meta["exposure_s"],
+        time_utc=table["time_utc"].astype("datetime64[ns]"),
         **arrays,
-        cospar=meta["cospar"], tle=None if meta["tle"] is None else tuple(meta["tle"]),
-        omm=meta["omm"], time_convention=meta["time_convention"], time_shift_s=meta["time_shift_s"],
-        mag_convention=meta["mag_convention"], source_name=meta["source_name"],
-        source_sha256=meta["source_sha256"], source_format=meta["source_format"],
+        cospar=meta["cospar"],
+        tle=None if meta["tle"] is None else tuple(meta["tle"]),
+        omm=meta["omm"],
+        time_convention=meta["time_convention"],
+        time_shift_s=meta["time_shift_s"],
+        mag_convention=meta["mag_convention"],
+        source_name=meta["source_name"],
+        source_sha256=meta["source_sha256"],
+        source_format=meta["source_format"],
         reduction=None if reduction is None else Reduction(**reduction),
-        mag_corrected=(np.ascontiguousarray(table["mag_corrected"])
-                       if "mag_corrected" in table.dtype.names else None),
+        mag_corrected=(np.ascontiguousarray(table["mag_corrected"]) if "mag_corrected" in table.dtype.names else None),
         header=meta["header"],
-        pass_id=meta["pass_id"], version=meta["version"], supersedes=meta["supersedes"],
-        superseded_by=superseded_by, ingested_utc=meta["ingested_utc"],
+        pass_id=meta["pass_id"],
+        version=meta["version"],
+        supersedes=meta["supersedes"],
+        superseded_by=superseded_by,
+        ingested_utc=meta["ingested_utc"],
     )
 
 
@@ -217,11 +283,26 @@ def write_catalog(file: h5py.File, rows: list[PassSummary]) -> None:
     """Replace ``/catalog`` with `rows` (one per stored pass version)."""
     table = np.empty(len(rows), dtype=CATALOG_DTYPE)
     for i, row in enumerate(rows):
-        table[i] = (row.pass_id, row.lineage_id, row.natural_id, row.version, row.supersedes or "",
-                    row.superseded_by or "", row.norad, row.name, row.band, row.site,
-                    row.start_utc.astype("datetime64[ns]").view("int64"),
-                    row.end_utc.astype("datetime64[ns]").view("int64"), row.n_points, row.exposure_s,
-                    row.source_name, row.source_sha256, row.source_format, row.ingested_utc)
+        table[i] = (
+            row.pass_id,
+            row.lineage_id,
+            row.natural_id,
+            row.version,
+            row.supersedes or "",
+            row.superseded_by or "",
+            row.norad,
+            row.name,
+            row.band,
+            row.site,
+            row.start_utc.astype("datetime64[ns]").view("int64"),
+            row.end_utc.astype("datetime64[ns]").view("int64"),
+            row.n_points,
+            row.exposure_s,
+            row.source_name,
+            row.source_sha256,
+            row.source_format,
+            row.ingested_utc,
+        )
     if "catalog" in file:
         del file["catalog"]
     _create_table(file, "catalog", table)
@@ -233,23 +314,30 @@ def read_catalog(file: h5py.File) -> list[PassSummary]:
         return []
     table = file["catalog"][()]
 
-    def text(value) -> str:
-        return value.decode("utf-8") if isinstance(value, bytes) else str(value)
-
     rows = []
     for record in table:
-        rows.append(PassSummary(
-            pass_id=text(record["pass_id"]), lineage_id=text(record["lineage_id"]),
-            natural_id=text(record["natural_id"]), version=int(record["version"]),
-            supersedes=text(record["supersedes"]) or None,
-            superseded_by=text(record["superseded_by"]) or None, norad=int(record["norad"]),
-            name=text(record["name"]), band=text(record["band"]), site=text(record["site"]),
-            start_utc=np.datetime64(int(record["start_utc"]), "ns"),
-            end_utc=np.datetime64(int(record["end_utc"]), "ns"), n_points=int(record["n_points"]),
-            exposure_s=float(record["exposure_s"]), source_name=text(record["source_name"]),
-            source_sha256=text(record["source_sha256"]), source_format=text(record["source_format"]),
-            ingested_utc=text(record["ingested_utc"]),
-        ))
+        rows.append(
+            PassSummary(
+                pass_id=attr_text(record["pass_id"]),
+                lineage_id=attr_text(record["lineage_id"]),
+                natural_id=attr_text(record["natural_id"]),
+                version=int(record["version"]),
+                supersedes=attr_text(record["supersedes"]) or None,
+                superseded_by=attr_text(record["superseded_by"]) or None,
+                norad=int(record["norad"]),
+                name=attr_text(record["name"]),
+                band=attr_text(record["band"]),
+                site=attr_text(record["site"]),
+                start_utc=np.datetime64(int(record["start_utc"]), "ns"),
+                end_utc=np.datetime64(int(record["end_utc"]), "ns"),
+                n_points=int(record["n_points"]),
+                exposure_s=float(record["exposure_s"]),
+                source_name=attr_text(record["source_name"]),
+                source_sha256=attr_text(record["source_sha256"]),
+                source_format=attr_text(record["source_format"]),
+                ingested_utc=attr_text(record["ingested_utc"]),
+            )
+        )
     return rows
 
 

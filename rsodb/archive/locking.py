@@ -6,16 +6,17 @@ file beside the current one, flushes it to disk, renames it over the current fil
 directory, so a reader (or a process that was killed mid-write) sees either the old file or the
 new one, never a mixture.
 """
+
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 import errno
 import fcntl
 import os
+from pathlib import Path
 import secrets
 import time
-from contextlib import contextmanager
-from pathlib import Path
-from typing import Iterator
 
 __all__ = ["ObjectLock", "replacing", "stale_temp_files", "TEMP_SUFFIX"]
 
@@ -71,7 +72,7 @@ class ObjectLock:
             os.close(self._fd)
             self._fd = None
 
-    def __enter__(self) -> "ObjectLock":
+    def __enter__(self) -> ObjectLock:
         self.acquire()
         return self
 

@@ -7,28 +7,30 @@ rename is the commit point. Readers open the current file read-only and see one 
 a killed writer leaves at most a temporary file, removed the next time the object is written or
 the archive is opened.
 """
+
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import replace
+from datetime import UTC, datetime
 import json
 import os
+from pathlib import Path
 import re
 import shutil
-from contextlib import contextmanager
-from dataclasses import dataclass, replace
-from datetime import datetime, timezone
-from pathlib import Path
-from typing import Callable, Iterable, Iterator, Sequence
 
 import h5py
 import numpy as np
 
 from ingest.observation import Pass
 from rsodb.archive import layout
+from rsodb.archive.ingest_report import CommitEvent, IngestedFile, IngestReport, PendingFile
+from rsodb.archive.ingestion import run_ingest
 from rsodb.archive.locking import ObjectLock, replacing, stale_temp_files
-from rsodb.archive.report import CommitEvent, IngestedFile, IngestReport
 from rsodb.archive.stored import ArchivedObject, PassSummary, StoredPass
 
-__all__ = ["Archive", "UnknownPassError", "PendingFile"]
+__all__ = ["Archive", "UnknownPassError"]
 
 # Rewrite an object file from scratch (instead of copying its bytes) once the space left behind
 # by replaced catalogs and results exceeds this share of the file.
@@ -42,27 +44,8 @@ class UnknownPassError(LookupError):
     """No stored pass matches an id (or the prefix matches several)."""
 
 
-@dataclass(frozen=True)
-class PendingFile:
-    """Passes read from one file, waiting to be committed to their object.
-
-    Attributes
-    ----------
-    path : str
-        Where they came from, as reported to the user.
-    sha256 : str
-        Content hash: a file whose hash is stored already is skipped.
-    passes : tuple of Pass
-        All of the same object.
-    """
-
-    path: str
-    sha256: str
-    passes: tuple[Pass, ...]
-
-
 def _utc_now() -> str:
-    return datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+    return datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
 
 
 class Archive:
@@ -88,8 +71,7 @@ class Archive:
     >>> archive.passes(norad=22076)[0].detrend().periodogram()         # doctest: +SKIP
     """
 
-    def __init__(self, path, *, create: bool = True, durable: bool = True,
-                 lock_timeout_s: float | None = 600.0):
+    def __init__(self, path, *, create: bool = True, durable: bool = True, lock_timeout_s: float | None = 600.0):
         self.path = Path(path)
         self.durable = durable
         self.lock_timeout_s = lock_timeout_s
@@ -182,8 +164,9 @@ class Archive:
         self._catalog_cache[path] = (key, rows, attrs)
         return rows, attrs
 
-    def catalog(self, norad: int | None = None, band: str | None = None, site: str | None = None, *,
-                all_versions: bool = False) -> list[PassSummary]:
+    def catalog(
+        self, norad: int | None = None, band: str | None = None, site: str | None = None, *, all_versions: bool = False
+    ) -> list[PassSummary]:
         """One `PassSummary` per pass, sorted by start time, without reading any arrays.
 
         Parameters are those of `passes`.
@@ -197,15 +180,19 @@ class Archive:
                 object_rows, _ = self._object_catalog(object_norad)
             except FileNotFoundError:
                 continue
-            rows.extend(row for row in object_rows
-                        if (all_versions or row.is_current)
-                        and (band is None or row.band == band)
-                        and (site_key is None or row.site.lower() == site_key))
+            rows.extend(
+                row
+                for row in object_rows
+                if (all_versions or row.is_current)
+                and (band is None or row.band == band)
+                and (site_key is None or row.site.lower() == site_key)
+            )
         rows.sort(key=lambda row: (row.start_utc, row.pass_id))
         return rows
 
-    def passes(self, norad: int | None = None, band: str | None = None, site: str | None = None, *,
-               all_versions: bool = False) -> list[StoredPass]:
+    def passes(
+        self, norad: int | None = None, band: str | None = None, site: str | None = None, *, all_versions: bool = False
+    ) -> list[StoredPass]:
         """Stored passes, sorted by start time.
 
         Parameters
@@ -268,7 +255,9 @@ class Archive:
                 "to list pass ids"
             )
         shown = ", ".join(row.pass_id for row in matches[:5]) + (", ..." if len(matches) > 5 else "")
-        raise UnknownPassError(f"pass id prefix {pass_id!r} matches {len(matches)} passes ({shown}); give more of the id")
+        raise UnknownPassError(
+            f"pass id prefix {pass_id!r} matches {len(matches)} passes ({shown}); give more of the id"
+        )
 
     def get(self, pass_id: str) -> StoredPass:
         """The stored pass with this id (a unique prefix is enough)."""
@@ -286,18 +275,30 @@ class Archive:
             current = [row for row in rows if row.is_current]
             if not current:
                 continue
-            result.append(ArchivedObject(
-                norad=norad, name=str(attrs.get("name", "")), cospar=str(attrs.get("cospar", "")),
-                n_passes=len(current), n_versions=len(rows),
-                bands=tuple(sorted({row.band for row in current})),
-                first_utc=min(row.start_utc for row in current), last_utc=max(row.start_utc for row in current),
-            ))
+            result.append(
+                ArchivedObject(
+                    norad=norad,
+                    name=str(attrs.get("name", "")),
+                    cospar=str(attrs.get("cospar", "")),
+                    n_passes=len(current),
+                    n_versions=len(rows),
+                    bands=tuple(sorted({row.band for row in current})),
+                    first_utc=min(row.start_utc for row in current),
+                    last_utc=max(row.start_utc for row in current),
+                )
+            )
         return result
 
     # -- writing -----------------------------------------------------------------------------
-    def ingest(self, paths, progress: bool = True, *, workers: int | None = None,
-               on_commit: Callable[[CommitEvent], None] | None = None,
-               commit_interval_s: float = 1.0) -> IngestReport:
+    def ingest(
+        self,
+        paths,
+        progress: bool = True,
+        *,
+        workers: int | None = None,
+        on_commit: Callable[[CommitEvent], None] | None = None,
+        commit_interval_s: float = 1.0,
+    ) -> IngestReport:
         """Read observation files and store their passes.
 
         Parameters
@@ -323,12 +324,16 @@ class Archive:
             Ingested, already present (same SHA-256), and failed files with their reasons.
             A bad file never stops the batch.
         """
-        from rsodb.archive.ingestion import run_ingest
-
         if isinstance(paths, (str, os.PathLike)):
             paths = [paths]
-        return run_ingest(self, list(paths), progress=progress, workers=workers, on_commit=on_commit,
-                          commit_interval_s=commit_interval_s)
+        return run_ingest(
+            self,
+            list(paths),
+            progress=progress,
+            workers=workers,
+            on_commit=on_commit,
+            commit_interval_s=commit_interval_s,
+        )
 
     def add(self, passes: Iterable[Pass]) -> IngestReport:
         """Store passes built in memory (synthetic or already read); same rules as `ingest`.
@@ -344,8 +349,10 @@ class Archive:
             by_object.setdefault(int(pass_.norad), {}).setdefault(sha, []).append(pass_)
         ingested, present = [], []
         for norad, by_sha in sorted(by_object.items()):
-            pending = [PendingFile(group[0].source_name or f"<pass {group[0].norad}>", sha, tuple(group))
-                       for sha, group in by_sha.items()]
+            pending = [
+                PendingFile(group[0].source_name or f"<pass {group[0].norad}>", sha, tuple(group))
+                for sha, group in by_sha.items()
+            ]
             event = self.commit(norad, pending)
             ingested.extend(event.ingested)
             present.extend(event.already_present)
@@ -500,8 +507,9 @@ class Archive:
                     for row, kind, name, result in entries:
                         kind_group = file["passes"][row.pass_id].require_group(kind)
                         if name in kind_group:
-                            file.attrs["freed_bytes"] = (int(file.attrs.get("freed_bytes", 0))
-                                                         + _storage_bytes(kind_group[name]))
+                            file.attrs["freed_bytes"] = int(file.attrs.get("freed_bytes", 0)) + _storage_bytes(
+                                kind_group[name]
+                            )
                             del kind_group[name]
                         group = kind_group.create_group(name)
                         group.attrs["stored_utc"] = now
@@ -552,8 +560,9 @@ def _open_object(path: Path) -> h5py.File:
     except FileNotFoundError:
         raise
     except OSError as exc:
-        raise OSError(f"{path} cannot be read as HDF5 ({exc}); restore it from a backup or move it "
-                      "out of the archive") from None
+        raise OSError(
+            f"{path} cannot be read as HDF5 ({exc}); restore it from a backup or move it out of the archive"
+        ) from None
     try:
         layout.check_schema(file, path)
     except ValueError:
@@ -613,7 +622,12 @@ def _identify(pass_: Pass, rows: list[PassSummary], now: str) -> tuple[dict, lis
             return True  # same object, start second, band and site: the same observation
         if row.band != pass_.band or row.site != pass_.site.name:
             return False
-        return bool(pass_.source_name) and row.source_name == pass_.source_name and row.start_utc <= end and start <= row.end_utc
+        return (
+            bool(pass_.source_name)
+            and row.source_name == pass_.source_name
+            and row.start_utc <= end
+            and start <= row.end_utc
+        )
 
     current = [row for row in rows if row.is_current and same_pass(row)]
     # Prefer the lineage named by this pass's own start, then the most recently stored one.
@@ -626,13 +640,33 @@ def _identify(pass_: Pass, rows: list[PassSummary], now: str) -> tuple[dict, lis
     else:
         lineage, version, supersedes = natural, 1, None
     pass_id = layout.versioned_pass_id(lineage, version)
-    metadata = layout.pass_metadata(pass_, pass_id=pass_id, lineage_id=lineage, natural_id=natural,
-                                    version=version, supersedes=supersedes, ingested_utc=now)
+    metadata = layout.pass_metadata(
+        pass_,
+        pass_id=pass_id,
+        lineage_id=lineage,
+        natural_id=natural,
+        version=version,
+        supersedes=supersedes,
+        ingested_utc=now,
+    )
     new_row = PassSummary(
-        pass_id=pass_id, lineage_id=lineage, natural_id=natural, version=version, supersedes=supersedes,
-        superseded_by=None, norad=int(pass_.norad), name=pass_.name, band=pass_.band, site=pass_.site.name,
-        start_utc=start, end_utc=end, n_points=len(pass_), exposure_s=float(pass_.exposure_s),
-        source_name=pass_.source_name, source_sha256=pass_.source_sha256, source_format=pass_.source_format,
+        pass_id=pass_id,
+        lineage_id=lineage,
+        natural_id=natural,
+        version=version,
+        supersedes=supersedes,
+        superseded_by=None,
+        norad=int(pass_.norad),
+        name=pass_.name,
+        band=pass_.band,
+        site=pass_.site.name,
+        start_utc=start,
+        end_utc=end,
+        n_points=len(pass_),
+        exposure_s=float(pass_.exposure_s),
+        source_name=pass_.source_name,
+        source_sha256=pass_.source_sha256,
+        source_format=pass_.source_format,
         ingested_utc=now,
     )
     updated = [replace(row, superseded_by=pass_id) if row.pass_id == supersedes else row for row in rows]

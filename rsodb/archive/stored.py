@@ -1,4 +1,5 @@
 """What the archive hands back: stored passes, their one-line summaries, and objects."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -41,8 +42,10 @@ class StoredPass(Pass):
         return self.superseded_by is None
 
     def lightcurve(self):
-        """This pass as a `rsodb.lightcurve.LightCurve`."""
-        from rsodb.lightcurve import LightCurve
+        """This pass as a `rsodb.periods.LightCurve`."""
+        # The period search loads astropy and scipy.stats (about a second); the archive commands
+        # that need no light curve start without them.
+        from rsodb.periods.lightcurve import LightCurve
 
         return LightCurve.from_pass(self)
 
@@ -51,9 +54,11 @@ class StoredPass(Pass):
         return self.lightcurve().detrend()
 
     def __repr__(self) -> str:
-        return (f"StoredPass({self.pass_id!r}, norad={self.norad}, band={self.band!r}, "
-                f"site={self.site.name!r}, start={str(self.start_utc)[:23]}, n={len(self)}, "
-                f"version={self.version})")
+        return (
+            f"StoredPass({self.pass_id!r}, norad={self.norad}, band={self.band!r}, "
+            f"site={self.site.name!r}, start={str(self.start_utc)[:23]}, n={len(self)}, "
+            f"version={self.version})"
+        )
 
 
 @dataclass(frozen=True)
@@ -112,13 +117,24 @@ class PassSummary:
     def to_dict(self) -> dict:
         """JSON-ready fields (times as ISO 8601 strings with a trailing Z)."""
         return {
-            "pass_id": self.pass_id, "norad": self.norad, "name": self.name, "site": self.site,
-            "band": self.band, "start_utc": _iso(self.start_utc), "end_utc": _iso(self.end_utc),
-            "duration_s": round(self.duration_s, 6), "n_points": self.n_points,
-            "exposure_s": self.exposure_s, "version": self.version, "lineage_id": self.lineage_id,
-            "supersedes": self.supersedes, "superseded_by": self.superseded_by,
-            "source_name": self.source_name, "source_sha256": self.source_sha256,
-            "source_format": self.source_format, "ingested_utc": self.ingested_utc,
+            "pass_id": self.pass_id,
+            "norad": self.norad,
+            "name": self.name,
+            "site": self.site,
+            "band": self.band,
+            "start_utc": _iso(self.start_utc),
+            "end_utc": _iso(self.end_utc),
+            "duration_s": round(self.duration_s, 6),
+            "n_points": self.n_points,
+            "exposure_s": self.exposure_s,
+            "version": self.version,
+            "lineage_id": self.lineage_id,
+            "supersedes": self.supersedes,
+            "superseded_by": self.superseded_by,
+            "source_name": self.source_name,
+            "source_sha256": self.source_sha256,
+            "source_format": self.source_format,
+            "ingested_utc": self.ingested_utc,
         }
 
 

@@ -4,6 +4,7 @@ Each sub-command lives in its own module of this package and exposes
 ``register(subparsers)``, which adds its parser and sets ``func(args) -> int``.
 Tests call ``main([...])`` directly.
 """
+
 from __future__ import annotations
 
 import argparse

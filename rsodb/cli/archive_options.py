@@ -1,23 +1,25 @@
 """The ``--archive DIR`` option and error reporting shared by the archive commands."""
+
 from __future__ import annotations
 
 import argparse
 import sys
 
-from rsodb.archive import Archive
+import rsodb
 
 __all__ = ["add_archive_option", "open_archive", "fail"]
 
 
 def add_archive_option(parser: argparse.ArgumentParser) -> None:
     """Add the required ``--archive DIR`` option."""
-    parser.add_argument("--archive", required=True, metavar="DIR",
-                        help="archive directory (created by 'rsodb ingest' when missing)")
+    parser.add_argument(
+        "--archive", required=True, metavar="DIR", help="archive directory (created by 'rsodb ingest' when missing)"
+    )
 
 
-def open_archive(args: argparse.Namespace, create: bool = False) -> Archive:
+def open_archive(args: argparse.Namespace, create: bool = False):
     """Open ``args.archive`` (raises ValueError with a one-sentence message when it is not usable)."""
-    return Archive(args.archive, create=create)
+    return rsodb.Archive(args.archive, create=create)
 
 
 def fail(command: str, error: Exception, status: int = 2) -> int:

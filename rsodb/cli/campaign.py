@@ -1,9 +1,11 @@
 """``rsodb campaign --archive DIR --object N``: fit every pass of an object in parallel on Dask."""
+
 from __future__ import annotations
 
 import argparse
 import json
 
+import rsodb
 from rsodb.cli.archive_options import add_archive_option, fail, open_archive
 
 __all__ = ["register", "run"]
@@ -24,11 +26,13 @@ skipped, so a rerun only does what is left; --restart refits them all.
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
-        "campaign", help="fit every pass of an object in parallel on Dask and report the fits",
+        "campaign",
+        help="fit every pass of an object in parallel on Dask and report the fits",
         description="Fit many passes on Dask distributed (a LocalCluster by default, or --scheduler ADDRESS); "
-                    "each fit is stored in the archive as it finishes; an HTML report shows the parameters "
-                    "against date and the fitted spin period beside the periodogram periods.",
-        epilog=EXAMPLE, formatter_class=argparse.RawDescriptionHelpFormatter,
+        "each fit is stored in the archive as it finishes; an HTML report shows the parameters "
+        "against date and the fitted spin period beside the periodogram periods.",
+        epilog=EXAMPLE,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_archive_option(parser)
     parser.add_argument("--object", type=int, metavar="NORAD", help="fit every pass of this object")
@@ -47,12 +51,9 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from rsodb.campaign import run_campaign
-    from rsodb.fit.config import FitConfig
-
     try:
         archive = open_archive(args)
-        config = FitConfig.from_toml(args.config) if args.config else FitConfig()
+        config = rsodb.FitConfig.from_toml(args.config) if args.config else rsodb.FitConfig()
         changes = {}
         if args.steps is not None:
             changes["sampler"] = {"n_steps": args.steps}
@@ -61,15 +62,21 @@ def run(args: argparse.Namespace) -> int:
         config = config.replace(**changes) if changes else config
         if args.workers is not None and args.workers < 1:
             raise ValueError(f"--workers {args.workers} must be at least 1")
-        outcome = run_campaign(archive, args.object, pass_ids=args.passes, band=args.band, config=config,
-                               scheduler=args.scheduler, n_workers=args.workers, restart=args.restart,
-                               progress=not (args.quiet or args.json))
+        outcome = rsodb.campaign.run_campaign(
+            archive,
+            args.object,
+            pass_ids=args.passes,
+            band=args.band,
+            config=config,
+            scheduler=args.scheduler,
+            n_workers=args.workers,
+            restart=args.restart,
+            progress=not (args.quiet or args.json),
+        )
         report_path = None
         if args.report:
-            from rsodb.report.campaign import build_campaign_report
-
             norads = sorted({archive.get(p).norad for p in (args.passes or [])}) if args.passes else [args.object]
-            report_path = build_campaign_report(archive, norads[0], name=config.name).write(args.report)
+            report_path = rsodb.report.build_campaign_report(archive, norads[0], name=config.name).write(args.report)
     except (ValueError, TypeError, OSError, LookupError) as error:
         return fail("campaign", error)
     if args.json:
@@ -77,8 +84,11 @@ def run(args: argparse.Namespace) -> int:
     else:
         for record in outcome.fitted:
             period = record["parameters"].get("spin_period_s")
-            text = f"P = {period['median']:.4f} (-{period['median'] - period['p16']:.4f} +{period['p84'] - period['median']:.4f}) s" \
-                if period else ""
+            text = (
+                f"P = {period['median']:.4f} (-{period['median'] - period['p16']:.4f} +{period['p84'] - period['median']:.4f}) s"
+                if period
+                else ""
+            )
             print(f"{record['pass_id']:40s} {text:36s} {'converged' if record['converged'] else 'NOT converged'}")
         for pass_id, error in outcome.failed:
             print(f"{pass_id:40s} failed: {error}")

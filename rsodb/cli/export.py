@@ -1,11 +1,13 @@
 """``rsodb export PASS --archive DIR --format csv|eossa``: a pass as CSV or EOSSA FITS."""
+
 from __future__ import annotations
 
 import argparse
 import os
-import sys
 from pathlib import Path
+import sys
 
+import rsodb
 from rsodb.cli.archive_options import add_archive_option, fail, open_archive
 
 __all__ = ["register", "run", "FORMATS"]
@@ -26,9 +28,11 @@ FORMATS = ("csv", "eossa")
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
-        "export", help="write one pass as CSV or EOSSA FITS",
+        "export",
+        help="write one pass as CSV or EOSSA FITS",
         description="Export one stored pass to a file other tools read.",
-        epilog=EXAMPLE, formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=EXAMPLE,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("pass_id", metavar="PASS", help="pass id (or a unique prefix)")
     add_archive_option(parser)
@@ -49,10 +53,8 @@ def run(args: argparse.Namespace) -> int:
             out = _free_path(args.out, args.force)
             frame.to_csv(out)
         else:
-            from rsodb.eossa import write_eossa
-
             out = _free_path(args.out or f"{stored.pass_id}.eossa.fits", args.force)
-            write_eossa(stored, out, overwrite=args.force)
+            rsodb.write_eossa(stored, out, overwrite=args.force)
     except (ValueError, LookupError, OSError) as error:
         return fail("export", error)
     print(f"wrote {out} ({len(stored)} samples of {stored.pass_id})", file=sys.stderr)

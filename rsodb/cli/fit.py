@@ -1,9 +1,11 @@
 """``rsodb fit PASS --archive DIR``: fit the spin state of one pass by MCMC and store the posterior."""
+
 from __future__ import annotations
 
 import argparse
 import json
 
+import rsodb
 from rsodb.cli.archive_options import add_archive_option, fail, open_archive
 
 __all__ = ["register", "run"]
@@ -23,11 +25,13 @@ A fit configuration (TOML) sets the model, data window, priors and sampler; see 
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
-        "fit", help="fit the spin state of one pass (emcee) and store the posterior",
+        "fit",
+        help="fit the spin state of one pass (emcee) and store the posterior",
         description="Fit a spin-state model (shape + attitude) to one stored pass with emcee: global search, "
-                    "resumable chain, posterior median and 16/84 percentiles, best-fit light curve and "
-                    "diagnostics written back to the archive.",
-        epilog=EXAMPLE, formatter_class=argparse.RawDescriptionHelpFormatter,
+        "resumable chain, posterior median and 16/84 percentiles, best-fit light curve and "
+        "diagnostics written back to the archive.",
+        epilog=EXAMPLE,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("pass_id", metavar="PASS", help="pass id (a unique prefix is enough; see 'rsodb ls')")
     add_archive_option(parser)
@@ -46,12 +50,17 @@ def register(subparsers) -> None:
 
 def config_from_args(args: argparse.Namespace):
     """The `FitConfig` of a config file plus command-line overrides."""
-    from rsodb.fit.config import FitConfig
-
-    config = FitConfig.from_toml(args.config) if args.config else FitConfig()
-    sampler = {key: value for key, value in (("n_steps", args.steps), ("n_walkers", args.walkers),
-                                             ("processes", args.processes), ("seed", args.seed))
-               if value is not None}
+    config = rsodb.FitConfig.from_toml(args.config) if args.config else rsodb.FitConfig()
+    sampler = {
+        key: value
+        for key, value in (
+            ("n_steps", args.steps),
+            ("n_walkers", args.walkers),
+            ("processes", args.processes),
+            ("seed", args.seed),
+        )
+        if value is not None
+    }
     changes = {"sampler": sampler} if sampler else {}
     if args.name:
         changes["name"] = args.name
@@ -59,24 +68,24 @@ def config_from_args(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
-    from rsodb.fit.runner import fit_pass
-
     try:
         archive = open_archive(args)
         config = config_from_args(args)
-        result = fit_pass(archive, args.pass_id, config, restart=args.restart, progress=not (args.quiet or args.json))
+        result = rsodb.fit_pass(
+            archive, args.pass_id, config, restart=args.restart, progress=not (args.quiet or args.json)
+        )
         paths = {}
         if args.plots:
-            from rsodb.fit.plots import save_all
-
-            paths = save_all(result, args.plots)
+            paths = rsodb.fit.save_all(result, args.plots)
     except (ValueError, TypeError, OSError, LookupError, RuntimeError) as error:
         return fail("fit", error)
     if args.json:
         print(json.dumps(dict(result.to_dict(), plots={k: str(v) for k, v in paths.items()}), indent=1))
     else:
-        print(f"fit {result.name!r} of {result.pass_id}: {result.mag_obs.size} samples, "
-              f"{result.n_walkers} walkers x {result.n_steps} steps in {result.elapsed_s:.0f} s")
+        print(
+            f"fit {result.name!r} of {result.pass_id}: {result.mag_obs.size} samples, "
+            f"{result.n_walkers} walkers x {result.n_steps} steps in {result.elapsed_s:.0f} s"
+        )
         print(result.table())
         for kind, path in paths.items():
             print(f"wrote {kind} plot {path}")

@@ -1,4 +1,5 @@
 """``rsodb ingest PATH... --archive DIR``: store observation files in an archive."""
+
 from __future__ import annotations
 
 import argparse
@@ -22,14 +23,21 @@ ingested or already present, 1 when any failed, 2 when the archive could not be 
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
-        "ingest", help="store observation files (and directories of them) in an archive",
+        "ingest",
+        help="store observation files (and directories of them) in an archive",
         description="Read observation files and store their passes in a crash-safe HDF5 archive.",
-        epilog=EXAMPLE, formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=EXAMPLE,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("paths", nargs="+", metavar="PATH", help="observation files or directories")
     add_archive_option(parser)
-    parser.add_argument("--workers", type=int, default=None, metavar="N",
-                        help="reader processes (default: one per CPU for large batches; 0: none)")
+    parser.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        metavar="N",
+        help="reader processes (default: one per CPU for large batches; 0: none)",
+    )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
     parser.set_defaults(func=run)

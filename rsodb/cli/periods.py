@@ -1,9 +1,11 @@
 """``rsodb periods --archive DIR``: the spin period of every pass, found in parallel and stored."""
+
 from __future__ import annotations
 
 import argparse
 import math
 
+import rsodb
 from rsodb.cli.archive_options import add_archive_option, fail, open_archive
 
 __all__ = ["register", "run"]
@@ -22,11 +24,13 @@ under --name and feed 'rsodb report periods' and the spin-period prior of fits.
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
-        "periods", help="find the spin period of every pass (in parallel) and store it",
+        "periods",
+        help="find the spin period of every pass (in parallel) and store it",
         description="Lomb-Scargle, harmonic candidates (P/2 .. 4P) scored by Fourier-series BIC and phase "
-                    "dispersion, a verdict per pass, and the synodic-to-sidereal correction from the pass "
-                    "geometry. Results are stored in the archive.",
-        epilog=EXAMPLE, formatter_class=argparse.RawDescriptionHelpFormatter,
+        "dispersion, a verdict per pass, and the synodic-to-sidereal correction from the pass "
+        "geometry. Results are stored in the archive.",
+        epilog=EXAMPLE,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_archive_option(parser)
     parser.add_argument("--object", type=int, metavar="NORAD", help="only this object (NORAD number)")
@@ -36,15 +40,19 @@ def register(subparsers) -> None:
     parser.add_argument("--name", default="default", help="stored result name (default: %(default)s)")
     parser.add_argument("--min-cycles", type=float, metavar="C", help="fewest cycles for a period (default 3)")
     parser.add_argument("--no-store", action="store_true", help="print only; leave the archive unchanged")
-    parser.add_argument("--no-geometry", action="store_true",
-                        help="skip the pass geometry (no sidereal period, faster)")
+    parser.add_argument(
+        "--no-geometry", action="store_true", help="skip the pass geometry (no sidereal period, faster)"
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(func=run)
 
 
 def _row(result) -> str:
-    period = ("-" if not math.isfinite(result.best_period_s)
-              else f"{result.best_period_s:10.4f} +- {result.uncertainty_s:.4f}")
+    period = (
+        "-"
+        if not math.isfinite(result.best_period_s)
+        else f"{result.best_period_s:10.4f} +- {result.uncertainty_s:.4f}"
+    )
     sidereal = ""
     if result.synodic is not None:
         low, high = sorted(result.sidereal_bounds_s)
@@ -53,17 +61,24 @@ def _row(result) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from rsodb.period_survey import survey_periods
-    from rsodb.periods import PeriodSettings
-
     try:
         archive = open_archive(args)
-        settings = PeriodSettings() if args.min_cycles is None else PeriodSettings(min_cycles=args.min_cycles)
+        settings = (
+            rsodb.PeriodSettings() if args.min_cycles is None else rsodb.PeriodSettings(min_cycles=args.min_cycles)
+        )
         if args.processes is not None and args.processes < 1:
             raise ValueError(f"--processes {args.processes} must be at least 1")
-        survey = survey_periods(archive, args.object, band=args.band, settings=settings, name=args.name,
-                                processes=args.processes, progress=not args.quiet and not args.json,
-                                store=not args.no_store, geometry=not args.no_geometry)
+        survey = rsodb.survey_periods(
+            archive,
+            args.object,
+            band=args.band,
+            settings=settings,
+            name=args.name,
+            processes=args.processes,
+            progress=not args.quiet and not args.json,
+            store=not args.no_store,
+            geometry=not args.no_geometry,
+        )
     except (ValueError, TypeError, OSError) as error:
         return fail("periods", error)
     if args.json:

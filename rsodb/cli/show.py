@@ -1,4 +1,5 @@
 """``rsodb show PASS --archive DIR``: everything the archive knows about one pass."""
+
 from __future__ import annotations
 
 import argparse
@@ -6,7 +7,7 @@ import json
 
 import numpy as np
 
-from rsodb.archive import StoredPass
+import rsodb
 from rsodb.cli.archive_options import add_archive_option, fail, open_archive
 
 __all__ = ["register", "run", "describe"]
@@ -23,9 +24,11 @@ PASS is a pass id from 'rsodb ls' or a unique beginning of one.
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
-        "show", help="show one pass: object, site, times, photometry, reduction, source, results",
+        "show",
+        help="show one pass: object, site, times, photometry, reduction, source, results",
         description="Show what the archive holds about one pass.",
-        epilog=EXAMPLE, formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=EXAMPLE,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("pass_id", metavar="PASS", help="pass id (or a unique prefix)")
     add_archive_option(parser)
@@ -38,33 +41,59 @@ def _iso(t: np.datetime64) -> str:
     return np.datetime_as_string(t, unit="ms") + "Z"
 
 
-def describe(stored: StoredPass, results: dict[str, list[str]]) -> dict:
+def describe(stored, results: dict[str, list[str]]) -> dict:
     """JSON-ready description of a stored pass (no per-sample arrays; see ``rsodb export``)."""
     mag = stored.best_mag[stored.valid & np.isfinite(stored.best_mag)]
     reduction = stored.reduction
     return {
-        "pass_id": stored.pass_id, "version": stored.version, "supersedes": stored.supersedes,
-        "superseded_by": stored.superseded_by, "ingested_utc": stored.ingested_utc,
-        "norad": stored.norad, "name": stored.name, "cospar": stored.cospar,
-        "site": {"name": stored.site.name, "lat_deg": stored.site.lat_deg, "lon_deg": stored.site.lon_deg,
-                 "elevation_m": stored.site.elevation_m},
-        "band": stored.band, "exposure_s": stored.exposure_s,
-        "start_utc": _iso(stored.start_utc), "end_utc": _iso(stored.end_utc),
-        "duration_s": round(stored.duration_s, 6), "n_points": len(stored),
-        "n_valid": int(stored.valid.sum()), "n_saturated": int(stored.saturated.sum()),
+        "pass_id": stored.pass_id,
+        "version": stored.version,
+        "supersedes": stored.supersedes,
+        "superseded_by": stored.superseded_by,
+        "ingested_utc": stored.ingested_utc,
+        "norad": stored.norad,
+        "name": stored.name,
+        "cospar": stored.cospar,
+        "site": {
+            "name": stored.site.name,
+            "lat_deg": stored.site.lat_deg,
+            "lon_deg": stored.site.lon_deg,
+            "elevation_m": stored.site.elevation_m,
+        },
+        "band": stored.band,
+        "exposure_s": stored.exposure_s,
+        "start_utc": _iso(stored.start_utc),
+        "end_utc": _iso(stored.end_utc),
+        "duration_s": round(stored.duration_s, 6),
+        "n_points": len(stored),
+        "n_valid": int(stored.valid.sum()),
+        "n_saturated": int(stored.saturated.sum()),
         "mag_min": float(mag.min()) if mag.size else None,
         "mag_median": float(np.median(mag)) if mag.size else None,
         "mag_max": float(mag.max()) if mag.size else None,
-        "range_km_min": float(np.nanmin(stored.range_km)), "range_km_max": float(np.nanmax(stored.range_km)),
-        "el_deg_min": float(np.nanmin(stored.el_deg)), "el_deg_max": float(np.nanmax(stored.el_deg)),
-        "time_convention": stored.time_convention, "time_shift_s": stored.time_shift_s,
-        "mag_convention": stored.mag_convention, "has_mag_corrected": stored.mag_corrected is not None,
-        "reduction": None if reduction is None else {
-            "zero_point_mag": reduction.zero_point_mag, "extinction_term_mag": reduction.extinction_term_mag,
-            "rms_mag": reduction.rms_mag, "n_points": reduction.n_points, "sign_error": reduction.sign_error},
-        "tle": list(stored.tle) if stored.tle else None, "omm": stored.omm,
-        "source_name": stored.source_name, "source_sha256": stored.source_sha256,
-        "source_format": stored.source_format, "results": results,
+        "range_km_min": float(np.nanmin(stored.range_km)),
+        "range_km_max": float(np.nanmax(stored.range_km)),
+        "el_deg_min": float(np.nanmin(stored.el_deg)),
+        "el_deg_max": float(np.nanmax(stored.el_deg)),
+        "time_convention": stored.time_convention,
+        "time_shift_s": stored.time_shift_s,
+        "mag_convention": stored.mag_convention,
+        "has_mag_corrected": stored.mag_corrected is not None,
+        "reduction": None
+        if reduction is None
+        else {
+            "zero_point_mag": reduction.zero_point_mag,
+            "extinction_term_mag": reduction.extinction_term_mag,
+            "rms_mag": reduction.rms_mag,
+            "n_points": reduction.n_points,
+            "sign_error": reduction.sign_error,
+        },
+        "tle": list(stored.tle) if stored.tle else None,
+        "omm": stored.omm,
+        "source_name": stored.source_name,
+        "source_sha256": stored.source_sha256,
+        "source_format": stored.source_format,
+        "results": results,
     }
 
 
@@ -81,17 +110,24 @@ def _text(info: dict) -> str:
         f"points     {info['n_points']}  ({info['n_valid']} valid, {info['n_saturated']} saturated)",
     ]
     if info["mag_median"] is not None:
-        lines.append(f"magnitude  {info['mag_min']:.3f} .. {info['mag_max']:.3f}, median {info['mag_median']:.3f}"
-                     + ("  (sign-corrected)" if info["has_mag_corrected"] else ""))
-    lines.append(f"geometry   range {info['range_km_min']:.0f} .. {info['range_km_max']:.0f} km, "
-                 f"elevation {info['el_deg_min']:.1f} .. {info['el_deg_max']:.1f} deg")
+        lines.append(
+            f"magnitude  {info['mag_min']:.3f} .. {info['mag_max']:.3f}, median {info['mag_median']:.3f}"
+            + ("  (sign-corrected)" if info["has_mag_corrected"] else "")
+        )
+    lines.append(
+        f"geometry   range {info['range_km_min']:.0f} .. {info['range_km_max']:.0f} km, "
+        f"elevation {info['el_deg_min']:.1f} .. {info['el_deg_max']:.1f} deg"
+    )
     reduction = info["reduction"]
     if reduction is not None:
         lines.append(
             f"reduction  A = {reduction['zero_point_mag']:.3f} mag, airmass term {reduction['extinction_term_mag']:+.3f} "
             f"mag per airmass, rms {reduction['rms_mag']:.4f} mag over {reduction['n_points']} points"
-            + ("; the file ADDED the extinction term (sign error), corrected magnitudes stored"
-               if reduction["sign_error"] else "")
+            + (
+                "; the file ADDED the extinction term (sign error), corrected magnitudes stored"
+                if reduction["sign_error"]
+                else ""
+            )
         )
     if info["tle"]:
         lines.append("TLE        " + "\n           ".join(info["tle"]))
@@ -104,30 +140,6 @@ def _text(info: dict) -> str:
     return "\n".join(lines)
 
 
-def _plot(stored: StoredPass, path: str) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    t_s = stored.t_s
-    mag = stored.best_mag
-    good = stored.valid & np.isfinite(mag)
-    fig, ax = plt.subplots(figsize=(10, 4), constrained_layout=True)
-    ax.errorbar(t_s[good], mag[good], yerr=stored.mag_err[good], fmt=".", ms=2, lw=0.5, alpha=0.7,
-                label=f"{stored.band} ({good.sum()} points)")
-    saturated = good & stored.saturated
-    if saturated.any():
-        ax.plot(t_s[saturated], mag[saturated], "rx", ms=4, label="saturated")
-    ax.invert_yaxis()
-    ax.set_xlabel(f"seconds since {_iso(stored.start_utc)}")
-    ax.set_ylabel(f"{stored.band} magnitude" + (" (1000 km)" if "1000 km" in stored.mag_convention else ""))
-    ax.set_title(f"{stored.norad} {stored.name} - {stored.site.name} - {stored.pass_id}")
-    ax.legend(loc="best")
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-
-
 def run(args: argparse.Namespace) -> int:
     try:
         archive = open_archive(args)
@@ -138,5 +150,5 @@ def run(args: argparse.Namespace) -> int:
     info = describe(stored, results)
     print(json.dumps(info, indent=1, ensure_ascii=False) if args.json else _text(info))
     if args.plot:
-        _plot(stored, args.plot)
+        rsodb.report.save_pass_plot(stored, args.plot)
     return 0

@@ -6,10 +6,12 @@
 
 See docs/fitting.md for the model, the likelihood's derivation and how to run a fit.
 """
+
 from rsodb.fit.config import FitConfig
 from rsodb.fit.likelihood import LIKELIHOODS, GaussianLikelihood, NormalisedLikelihood, make_likelihood
 from rsodb.fit.model import ATTITUDES, ConvexFacets, SpinStateModel
 from rsodb.fit.parameters import KNOWN, Parameter, ParameterSpace
+from rsodb.fit.plots import save_all
 from rsodb.fit.posterior import Posterior
 from rsodb.fit.priors import BoundedNormal, Uniform, prior_from_dict
 from rsodb.fit.result import FitResult
@@ -18,8 +20,28 @@ from rsodb.fit.sampler import ChainRun, SamplerSettings, run_sampler
 from rsodb.fit.shapes import SHAPES
 
 __all__ = [
-    "FitConfig", "LIKELIHOODS", "GaussianLikelihood", "NormalisedLikelihood", "make_likelihood",
-    "ATTITUDES", "ConvexFacets", "SpinStateModel", "KNOWN", "Parameter", "ParameterSpace", "Posterior",
-    "BoundedNormal", "Uniform", "prior_from_dict", "FitResult", "FitProblem", "fit_pass", "fit_problem",
-    "ChainRun", "SamplerSettings", "run_sampler", "SHAPES",
+    "FitConfig",
+    "LIKELIHOODS",
+    "GaussianLikelihood",
+    "NormalisedLikelihood",
+    "make_likelihood",
+    "ATTITUDES",
+    "ConvexFacets",
+    "SpinStateModel",
+    "KNOWN",
+    "Parameter",
+    "ParameterSpace",
+    "Posterior",
+    "BoundedNormal",
+    "Uniform",
+    "prior_from_dict",
+    "FitResult",
+    "FitProblem",
+    "fit_pass",
+    "fit_problem",
+    "ChainRun",
+    "SamplerSettings",
+    "run_sampler",
+    "SHAPES",
+    "save_all",
 ]

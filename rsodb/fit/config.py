@@ -1,59 +1,19 @@
 """Fit configuration: a TOML file (or dict) with the model, data selection, likelihood,
 parameters and sampler settings of a fit.
 
-Every key is optional; `FitConfig()` is the default fit (the published model's five
-parameters plus a jitter term, spin-period prior +-1% around the stored period, 20 walkers x
-500 steps started from a global search). An example, with the defaults written out::
-
-    name = "default"              # the fit's name in the archive (several fits per pass)
-    discard = 250                 # burn-in steps dropped from the summary (default: half)
-
-    [model]
-    shape = "auto"                # auto (by NORAD number, else "ellipsoid") | topex | cosmos2502 | box | ellipsoid | lopsided
-    attitude = "precessing"       # precessing | inertial | torque_free
-    spin_axis = "z"               # body axis that spins (precessing, inertial)
-    renderer = "cached"           # cached (fast path) | direct (slow reference)
-    accuracy_mag = 0.01           # accuracy asked of the cache
-    n_sub = 0                     # exposure sub-samples per frame; 0 = from exposure and period
-
-    [data]
-    start_s = 0.0                 # fit the samples from start_s ...
-    duration_s = 0.0              # ... for duration_s seconds (0 = to the end of the pass)
-    stride = 1                    # keep every stride-th sample
-    max_points = 0                # then at most this many, evenly spread (0 = no limit)
-    keep_saturated = false
-    mag_err_floor = 0.0           # errors below this are raised to it (mag)
-
-    [likelihood]
-    kind = "gaussian"             # gaussian | normalised (the published comparison)
-    offset = "marginalised"       # marginalised | none
-
-    [parameters]                  # a number fixes a parameter; a table sets its prior
-    spin_period_s = { from = "periods", width = 0.01, multiple = 1.0, frame = "sidereal" }
-    precession_period_s = { kind = "uniform", low = 50.0, high = 5000.0 }
-    precession_angle_deg = { kind = "normal", mean = 35.0, sigma = 10.0, low = 0.0, high = 90.0 }
-    jitter_mag = { kind = "uniform", low = 0.0, high = 0.5 }
-    panel_pitch_deg = 12.0        # an articulation of the shape, fixed
-    # roughness = { kind = "uniform", low = 0.1, high = 0.8 }   # material scalars, optional
-
-    [sampler]
-    n_walkers = 20
-    n_steps = 500
-    init = "search"               # search (differential evolution, then a small ball) | prior
-    processes = 1                 # 0 = one per core
-    seed = 0
-
-Parameters not named keep their defaults: the attitude family's parameters with the priors of
-`rsodb.fit.parameters.KNOWN` (the spin period from the periods result), ``jitter_mag`` free
-on [0, 0.5] mag (gaussian likelihood only), the shape's articulations fixed at its defaults.
+Every key is optional; `FitConfig()` is the default fit. configs/standard.toml writes every
+default out, and docs/fitting.md describes each key with an example.
 """
+
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, replace
 import math
 from pathlib import Path
+import tomllib
 from types import MappingProxyType
-from typing import Any, Mapping
+from typing import Any
 
 from rsodb.fit.likelihood import LIKELIHOODS, OFFSET_MODES
 from rsodb.fit.model import ATTITUDES
@@ -98,7 +58,9 @@ class ModelConfig:
         if not (isinstance(self.n_sub, int) and 0 <= self.n_sub <= 64):
             raise ValueError(f"[model] n_sub={self.n_sub!r} must be a whole number 0..64 (0 chooses it)")
         if not (isinstance(self.accuracy_mag, (int, float)) and 0 < self.accuracy_mag < 1):
-            raise ValueError(f"[model] accuracy_mag={self.accuracy_mag!r} must be a small positive number of magnitudes")
+            raise ValueError(
+                f"[model] accuracy_mag={self.accuracy_mag!r} must be a small positive number of magnitudes"
+            )
 
     @property
     def attitude_settings(self) -> dict:
@@ -150,7 +112,7 @@ def _check_parameter_spec(name: str, spec) -> None:
         raise ValueError(f"[parameters] {name} = {spec!r} must be a finite number")
     if isinstance(spec, Mapping) and "from" in spec:
         if spec["from"] != "periods" or name != "spin_period_s":
-            raise ValueError(f"[parameters] {name}: only spin_period_s can take its prior from = \"periods\"")
+            raise ValueError(f'[parameters] {name}: only spin_period_s can take its prior from = "periods"')
         _check_keys(f"parameters.{name}", spec, ("from", "width", "multiple", "frame"))
     elif isinstance(spec, Mapping):
         prior = prior_from_dict(spec, name)
@@ -175,7 +137,9 @@ class FitConfig:
         for name, spec in dict(self.parameters).items():
             _check_parameter_spec(name, spec)
         object.__setattr__(self, "parameters", MappingProxyType(dict(self.parameters)))
-        if self.discard is not None and not (isinstance(self.discard, int) and 0 <= self.discard < self.sampler.n_steps):
+        if self.discard is not None and not (
+            isinstance(self.discard, int) and 0 <= self.discard < self.sampler.n_steps
+        ):
             raise ValueError(f"discard={self.discard!r} must be a whole number below n_steps={self.sampler.n_steps}")
 
     def __reduce__(self):
@@ -183,7 +147,7 @@ class FitConfig:
 
     # -- construction ---------------------------------------------------------------------------
     @classmethod
-    def from_dict(cls, record: Mapping) -> "FitConfig":
+    def from_dict(cls, record: Mapping) -> FitConfig:
         """Build from the dict form (what `tomllib` returns)."""
         sections = {"model": ModelConfig, "data": DataConfig, "likelihood": LikelihoodConfig}
         _check_keys("top level", record, ("name", "discard", "parameters", "sampler", *sections))
@@ -199,10 +163,8 @@ class FitConfig:
         return cls(**kwargs)
 
     @classmethod
-    def from_toml(cls, path: str | Path) -> "FitConfig":
+    def from_toml(cls, path: str | Path) -> FitConfig:
         """Read a TOML fit configuration."""
-        import tomllib
-
         path = Path(path)
         try:
             with open(path, "rb") as handle:
@@ -218,11 +180,17 @@ class FitConfig:
 
     def to_dict(self) -> dict:
         """The dict form (JSON/TOML-friendly)."""
-        return {"name": self.name, "discard": self.discard, "model": asdict(self.model), "data": asdict(self.data),
-                "likelihood": asdict(self.likelihood), "parameters": dict(self.parameters),
-                "sampler": self.sampler.to_dict()}
+        return {
+            "name": self.name,
+            "discard": self.discard,
+            "model": asdict(self.model),
+            "data": asdict(self.data),
+            "likelihood": asdict(self.likelihood),
+            "parameters": dict(self.parameters),
+            "sampler": self.sampler.to_dict(),
+        }
 
-    def replace(self, **changes) -> "FitConfig":
+    def replace(self, **changes) -> FitConfig:
         """A copy with top-level fields changed; ``sampler=`` may be a dict of sampler changes."""
         if isinstance(changes.get("sampler"), Mapping):
             changes["sampler"] = self.sampler.replace(**changes["sampler"])
@@ -267,13 +235,14 @@ def _period_prior(spec: Mapping, periods) -> Uniform:
     if periods is None:
         raise ValueError(
             "spin_period_s takes its prior from the stored period but the pass has none; run "
-            "'rsodb periods' on it first, or give spin_period_s a prior in the fit configuration")
+            "'rsodb periods' on it first, or give spin_period_s a prior in the fit configuration"
+        )
     width = float(spec.get("width", PERIODS_PRIOR["width"]))
     multiple = float(spec.get("multiple", PERIODS_PRIOR["multiple"]))
     if not (math.isfinite(multiple) and multiple > 0):
         raise ValueError(f"[parameters] spin_period_s: multiple={multiple!r} must be a positive number (e.g. 2 for 2P)")
-    prior = periods.prior(width_frac=width, frame=spec.get("frame", PERIODS_PRIOR["frame"]))
-    return Uniform(prior.low * multiple, prior.high * multiple)
+    low, high = periods.prior_interval_s(width_frac=width, frame=spec.get("frame", PERIODS_PRIOR["frame"]))
+    return Uniform(low * multiple, high * multiple)
 
 
 def _config_from_dict(record):

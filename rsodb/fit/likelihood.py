@@ -28,11 +28,12 @@
     ``ln L = -1/2 sum (n_obs - n_model)^2`` with unit variance and no error bars. It ignores
     the observed errors and the absolute brightness, so its posteriors are not calibrated.
 """
+
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 import math
-from typing import Mapping
 
 import numpy as np
 
@@ -88,7 +89,7 @@ class GaussianLikelihood:
         object.__setattr__(self, "mag_err", err)
 
     def _weights(self, jitter_mag: float) -> np.ndarray:
-        return 1.0 / (self.mag_err ** 2 + jitter_mag ** 2)
+        return 1.0 / (self.mag_err**2 + jitter_mag**2)
 
     def offset_mag(self, mag_model: np.ndarray, jitter_mag: float = 0.0) -> float:
         """The offset ``c_hat`` that best aligns model to data (0 when the offset is not free)."""
@@ -115,7 +116,7 @@ class GaussianLikelihood:
         ``sigma`` includes the jitter.
         """
         shifted = mag_model + self.offset_mag(mag_model, jitter_mag)
-        return self.mag_obs, shifted, np.sqrt(self.mag_err ** 2 + jitter_mag ** 2)
+        return self.mag_obs, shifted, np.sqrt(self.mag_err**2 + jitter_mag**2)
 
     def chi2(self, mag_model: np.ndarray, jitter_mag: float = 0.0) -> float:
         """Sum of squared normalised residuals at the best offset."""

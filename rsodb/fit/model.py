@@ -4,13 +4,13 @@ Work is split by how often it changes:
 
 - once per pass: the inertial geometry (`raycast.geometry.PassGeometry`: Sun and observer
   directions, local orbital frames, Earth shadow, per exposure sub-sample), and the shape's
-  fast brightness function (`raycast.cache`, or the analytic `ConvexFacets` below);
+  fast brightness function (`raycast.renderer.cache`, or the analytic `ConvexFacets` below);
 - once per MCMC step: the attitude model built from the parameters, the body-frame directions
   (``geometry.body_frame(attitude)``, one batched matrix product) and the brightness function
   on those ``n * k`` direction pairs, averaged over each exposure and weighted by the sunlit
-  fraction, then converted to magnitudes (`raycast.photometry`).
+  fraction, then converted to magnitudes (`raycast.renderer.photometry`).
 
-Attitude families (``ATTITUDES``) turn named parameters into a `raycast.attitude` model. The
+Attitude families (``ATTITUDES``) turn named parameters into a `raycast.geometry.attitude` model. The
 phases are defined at a reference epoch ``epoch_s`` (seconds after the pass's first sample,
 by default the pass mid-time), not at the first sample: over a pass of N spin cycles the
 phase at the start is correlated with the period N times more strongly than the phase at the
@@ -21,14 +21,20 @@ facets (no facet can shadow or hide another): ``I/E = sum_f A_f rho_f / pi max(0
 max(0, n_f.o)``. It is a legitimate model of its own (a box or prism for an object without a
 detailed model) and the fast double the tests use.
 """
+
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 import math
 from types import MappingProxyType
-from typing import Any, Callable, Mapping
+from typing import Any
 
 import numpy as np
+
+from raycast.geometry.attitude import InertialSpin, PrecessingSpin, TorqueFree
+from raycast.renderer.photometry import magnitude, solar_magnitude
+from raycast.renderer.scene import icosphere
 
 __all__ = ["ConvexFacets", "SpinStateModel", "AttitudeFamily", "ATTITUDES", "EpochShifted"]
 
@@ -87,7 +93,7 @@ class ConvexFacets:
         return (cos_i * cos_e) @ self._weight
 
     @classmethod
-    def box(cls, size_m=(1.0, 1.0, 2.0), albedo: float = 0.2) -> "ConvexFacets":
+    def box(cls, size_m=(1.0, 1.0, 2.0), albedo: float = 0.2) -> ConvexFacets:
         """A rectangular box centred on the origin, edges along the body axes.
 
         Parameters
@@ -103,7 +109,7 @@ class ConvexFacets:
         return cls(normals, areas, albedo)
 
     @classmethod
-    def ellipsoid(cls, semi_axes_m=(1.0, 0.5, 0.35), subdivisions: int = 3, albedo: float = 0.2) -> "ConvexFacets":
+    def ellipsoid(cls, semi_axes_m=(1.0, 0.5, 0.35), subdivisions: int = 3, albedo: float = 0.2) -> ConvexFacets:
         """A triaxial ellipsoid as a convex polyhedron (a scaled, subdivided icosahedron).
 
         Its facet normals cover every direction, so it is never dark while lit at a phase
@@ -121,40 +127,12 @@ class ConvexFacets:
         """
         if not (isinstance(subdivisions, int) and 0 <= subdivisions <= 6):
             raise ValueError(f"subdivisions={subdivisions!r} must be a whole number 0..6")
-        vertices, faces = _icosphere(subdivisions)
+        vertices, faces = icosphere(subdivisions)
         vertices = vertices * np.asarray(semi_axes_m, dtype=float)
         corners = vertices[faces]
         cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
         area2 = np.linalg.norm(cross, axis=1)
         return cls(cross / area2[:, None], 0.5 * area2, albedo)
-
-
-def _icosphere(subdivisions: int) -> tuple[np.ndarray, np.ndarray]:
-    """Unit-sphere vertices (v, 3) and outward-wound faces (f, 3) of a subdivided icosahedron."""
-    g = (1 + math.sqrt(5)) / 2
-    vertices = [(-1, g, 0), (1, g, 0), (-1, -g, 0), (1, -g, 0), (0, -1, g), (0, 1, g), (0, -1, -g), (0, 1, -g),
-                (g, 0, -1), (g, 0, 1), (-g, 0, -1), (-g, 0, 1)]
-    faces = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4), (11, 10, 2),
-             (10, 7, 6), (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8), (3, 8, 9), (4, 9, 5), (2, 4, 11),
-             (6, 2, 10), (8, 6, 7), (9, 8, 1)]
-    vertices = [np.array(v, dtype=float) / np.linalg.norm(v) for v in vertices]
-    for _ in range(subdivisions):
-        midpoints: dict = {}
-
-        def middle(a, b):
-            key = (min(a, b), max(a, b))
-            if key not in midpoints:
-                m = vertices[a] + vertices[b]
-                vertices.append(m / np.linalg.norm(m))
-                midpoints[key] = len(vertices) - 1
-            return midpoints[key]
-
-        refined = []
-        for a, b, c in faces:
-            ab, bc, ca = middle(a, b), middle(b, c), middle(c, a)
-            refined += [(a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca)]
-        faces = refined
-    return np.array(vertices), np.array(faces)
 
 
 # -- attitude families -------------------------------------------------------------------
@@ -203,19 +181,24 @@ def _always(values) -> bool:
 
 
 def _precessing(values, spin_axis="z"):
-    from raycast.attitude import PrecessingSpin
-
     return PrecessingSpin(
-        period_s=values["spin_period_s"], phase_deg=values["spin_phase_deg"],
-        precession_period_s=values["precession_period_s"], precession_phase_deg=values["precession_phase_deg"],
-        precession_angle_deg=values["precession_angle_deg"], spin_axis=spin_axis)
+        period_s=values["spin_period_s"],
+        phase_deg=values["spin_phase_deg"],
+        precession_period_s=values["precession_period_s"],
+        precession_phase_deg=values["precession_phase_deg"],
+        precession_angle_deg=values["precession_angle_deg"],
+        spin_axis=spin_axis,
+    )
 
 
 def _inertial(values, spin_axis="z"):
-    from raycast.attitude import InertialSpin
-
-    return InertialSpin(pole_ra_deg=values["pole_ra_deg"], pole_dec_deg=values["pole_dec_deg"],
-                        period_s=values["spin_period_s"], phase_deg=values["spin_phase_deg"], spin_axis=spin_axis)
+    return InertialSpin(
+        pole_ra_deg=values["pole_ra_deg"],
+        pole_dec_deg=values["pole_dec_deg"],
+        period_s=values["spin_period_s"],
+        phase_deg=values["spin_phase_deg"],
+        spin_axis=spin_axis,
+    )
 
 
 def _torque_free_inertia(values) -> tuple[float, float, float]:
@@ -229,34 +212,52 @@ def _torque_free_supports(values) -> bool:
 
 
 def _torque_free(values):
-    from raycast.attitude import TorqueFree
-
     polar, azimuth = math.radians(values["omega_polar_deg"]), math.radians(values["omega_azimuth_deg"])
     rate = 2 * math.pi / values["spin_period_s"]
-    omega = rate * np.array([math.sin(polar) * math.cos(azimuth), math.sin(polar) * math.sin(azimuth),
-                             math.cos(polar)])
-    return TorqueFree.from_angular_momentum(_torque_free_inertia(values), omega, values["pole_ra_deg"],
-                                            values["pole_dec_deg"], values["spin_phase_deg"])
+    omega = rate * np.array([math.sin(polar) * math.cos(azimuth), math.sin(polar) * math.sin(azimuth), math.cos(polar)])
+    return TorqueFree.from_angular_momentum(
+        _torque_free_inertia(values), omega, values["pole_ra_deg"], values["pole_dec_deg"], values["spin_phase_deg"]
+    )
 
 
-ATTITUDES: Mapping[str, AttitudeFamily] = MappingProxyType({
-    "precessing": AttitudeFamily(
-        ("spin_period_s", "spin_phase_deg", "precession_period_s", "precession_phase_deg", "precession_angle_deg"),
-        ("spin_axis",), _precessing, _always,
-        "the published model (raycast.attitude.PrecessingSpin): spin about a body axis, that axis "
-        "precessing on a cone about nadir (the satellite-to-Earth-centre direction)"),
-    "inertial": AttitudeFamily(
-        ("spin_period_s", "spin_phase_deg", "pole_ra_deg", "pole_dec_deg"), ("spin_axis",), _inertial, _always,
-        "spin about a body axis fixed in inertial space (raycast.attitude.InertialSpin, pole RA/Dec in GCRS)"),
-    "torque_free": AttitudeFamily(
-        ("spin_period_s", "spin_phase_deg", "pole_ra_deg", "pole_dec_deg", "inertia_ratio_2", "inertia_ratio_3",
-         "omega_polar_deg", "omega_azimuth_deg"),
-        (), _torque_free, _torque_free_supports,
-        "a rigid body tumbling freely (raycast.attitude.TorqueFree): principal moments (1, I2/I1, I3/I1) "
-        "along body x, y, z; angular velocity at the epoch of magnitude 2 pi / spin_period_s in the "
-        "body direction (omega_polar_deg from +z, omega_azimuth_deg from +x toward +y); angular "
-        "momentum toward (pole_ra_deg, pole_dec_deg); spin_phase_deg about it"),
-})
+ATTITUDES: Mapping[str, AttitudeFamily] = MappingProxyType(
+    {
+        "precessing": AttitudeFamily(
+            ("spin_period_s", "spin_phase_deg", "precession_period_s", "precession_phase_deg", "precession_angle_deg"),
+            ("spin_axis",),
+            _precessing,
+            _always,
+            "the published model (raycast.geometry.attitude.PrecessingSpin): spin about a body axis, that axis "
+            "precessing on a cone about nadir (the satellite-to-Earth-centre direction)",
+        ),
+        "inertial": AttitudeFamily(
+            ("spin_period_s", "spin_phase_deg", "pole_ra_deg", "pole_dec_deg"),
+            ("spin_axis",),
+            _inertial,
+            _always,
+            "spin about a body axis fixed in inertial space (raycast.geometry.attitude.InertialSpin, pole RA/Dec in GCRS)",
+        ),
+        "torque_free": AttitudeFamily(
+            (
+                "spin_period_s",
+                "spin_phase_deg",
+                "pole_ra_deg",
+                "pole_dec_deg",
+                "inertia_ratio_2",
+                "inertia_ratio_3",
+                "omega_polar_deg",
+                "omega_azimuth_deg",
+            ),
+            (),
+            _torque_free,
+            _torque_free_supports,
+            "a rigid body tumbling freely (raycast.geometry.attitude.TorqueFree): principal moments (1, I2/I1, I3/I1) "
+            "along body x, y, z; angular velocity at the epoch of magnitude 2 pi / spin_period_s in the "
+            "body direction (omega_polar_deg from +z, omega_azimuth_deg from +x toward +y); angular "
+            "momentum toward (pole_ra_deg, pole_dec_deg); spin_phase_deg about it",
+        ),
+    }
+)
 
 
 # -- the forward model -----------------------------------------------------------------------
@@ -270,7 +271,7 @@ class SpinStateModel:
         The pass's inertial geometry at the observed times (computed once).
     brightness : object
         ``intensity(sun_body (m, 3), obs_body (m, 3), **parameters) -> (m,)`` I/E in m^2/sr:
-        a `raycast.cache` fast path, a direct renderer, or `ConvexFacets`.
+        a `raycast.renderer.cache` fast path, a direct renderer, or `ConvexFacets`.
     attitude : str
         A key of `ATTITUDES`.
     attitude_settings : mapping
@@ -303,12 +304,12 @@ class SpinStateModel:
         if unknown:
             raise ValueError(
                 f"attitude model {self.attitude!r} has no settings {unknown}; "
-                f"it accepts {', '.join(family.settings) or 'none'}")
+                f"it accepts {', '.join(family.settings) or 'none'}"
+            )
         if self.epoch_s is None:
             object.__setattr__(self, "epoch_s", float(0.5 * (self.geometry.t_s[0] + self.geometry.t_s[-1])))
         object.__setattr__(self, "attitude_settings", MappingProxyType(dict(self.attitude_settings)))
         object.__setattr__(self, "brightness_parameters", tuple(self.brightness_parameters))
-        from raycast.photometry import solar_magnitude
 
         solar_magnitude(self.band)  # fail now, not at the first step, for a band without a solar magnitude
 
@@ -316,8 +317,16 @@ class SpinStateModel:
         # The element set inside the geometry (an sgp4 Satrec) does not pickle and is not
         # needed once the geometry is computed: process-pool workers get the geometry without it.
         geometry = replace(self.geometry, satellite=None)
-        return _rebuild_model, (geometry, self.brightness, self.attitude, dict(self.attitude_settings),
-                                self.brightness_parameters, self.band, self.reference_range_km, self.epoch_s)
+        return _rebuild_model, (
+            geometry,
+            self.brightness,
+            self.attitude,
+            dict(self.attitude_settings),
+            self.brightness_parameters,
+            self.band,
+            self.reference_range_km,
+            self.epoch_s,
+        )
 
     @property
     def parameters(self) -> tuple[str, ...]:
@@ -337,28 +346,30 @@ class SpinStateModel:
         """False where the values describe no physical body (impossible inertia ratios, albedo > 1)."""
         brightness_supports = getattr(self.brightness, "supports", None)
         return bool(ATTITUDES[self.attitude].supports(values)) and (
-            brightness_supports is None or bool(brightness_supports(values)))
+            brightness_supports is None or bool(brightness_supports(values))
+        )
 
     def intensity(self, values: Mapping[str, float]) -> np.ndarray:
         """(n,) I/E in m^2/sr, averaged over each exposure, Earth shadow applied."""
         body = self.geometry.body_frame(self.attitude_model(values))
         n, k = body.sunlit.shape
         kwargs = {name: values[name] for name in self.brightness_parameters}
-        per_sub = self.brightness.intensity(body.sun_body.reshape(n * k, 3), body.obs_body.reshape(n * k, 3),
-                                            **kwargs).reshape(n, k)
+        per_sub = self.brightness.intensity(
+            body.sun_body.reshape(n * k, 3), body.obs_body.reshape(n * k, 3), **kwargs
+        ).reshape(n, k)
         return (per_sub * body.sunlit) @ body.weights
 
     def magnitudes(self, values: Mapping[str, float]) -> np.ndarray:
         """(n,) magnitudes in the pass's band (at `reference_range_km` when set); +inf where dark."""
-        from raycast.photometry import magnitude
-
         if not self.supports(values):
             return np.full(self.n, np.inf)
         range_km = self.geometry.range_km if self.reference_range_km is None else self.reference_range_km
         return magnitude(self.intensity(values), range_km, self.band)
 
 
-def _rebuild_model(geometry, brightness, attitude, attitude_settings, brightness_parameters, band,
-                   reference_range_km, epoch_s):
-    return SpinStateModel(geometry, brightness, attitude, attitude_settings, brightness_parameters, band,
-                          reference_range_km, epoch_s)
+def _rebuild_model(
+    geometry, brightness, attitude, attitude_settings, brightness_parameters, band, reference_range_km, epoch_s
+):
+    return SpinStateModel(
+        geometry, brightness, attitude, attitude_settings, brightness_parameters, band, reference_range_km, epoch_s
+    )

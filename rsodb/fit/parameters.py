@@ -11,11 +11,12 @@ the prior and the model see it. Summaries of such parameters use circular statis
 (`wrap_samples` centres the samples on their circular mean before taking percentiles), so a
 posterior that straddles 0/360 deg is reported as one interval, not two half-modes.
 """
+
 from __future__ import annotations
 
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Iterable, Mapping
 
 import numpy as np
 
@@ -37,32 +38,67 @@ class Known:
 
 # Default priors are wide; the configuration narrows them (the spin period from the stored
 # periodogram result).
-KNOWN: Mapping[str, Known] = MappingProxyType({
-    "spin_period_s": Known("P", "s", None, Uniform(0.5, 1000.0), "spin period about the body spin axis"),
-    "spin_phase_deg": Known("phi", "deg", 360.0, Uniform(0.0, 360.0),
-                            "spin phase at the reference epoch (the pass mid-time)"),
-    "precession_period_s": Known("P_pr", "s", None, Uniform(50.0, 5000.0),
-                                 "period of the spin axis around the precession cone"),
-    "precession_phase_deg": Known("phi_pr", "deg", 360.0, Uniform(0.0, 360.0),
-                                  "precession phase at the reference epoch (the pass mid-time)"),
-    "precession_angle_deg": Known("theta", "deg", None, Uniform(0.0, 90.0),
-                                  "half-angle of the precession cone about the satellite-to-Earth-centre direction"),
-    "pole_ra_deg": Known("RA_pole", "deg", 360.0, Uniform(0.0, 360.0), "right ascension of an inertial spin pole (GCRS)"),
-    "pole_dec_deg": Known("Dec_pole", "deg", None, Uniform(-90.0, 90.0), "declination of an inertial spin pole (GCRS)"),
-    "inertia_ratio_2": Known("I2/I1", "", None, Uniform(0.2, 5.0), "principal moment about body y over that about x"),
-    "inertia_ratio_3": Known("I3/I1", "", None, Uniform(0.2, 5.0), "principal moment about body z over that about x"),
-    "omega_polar_deg": Known("omega_pol", "deg", None, Uniform(0.0, 180.0),
-                             "angle of the angular velocity from body +z at the epoch (torque-free body)"),
-    "omega_azimuth_deg": Known("omega_az", "deg", 360.0, Uniform(0.0, 360.0),
-                               "azimuth of the angular velocity from body +x toward +y at the epoch"),
-    "panel_pitch_deg": Known("pitch", "deg", None, Uniform(-90.0, 90.0), "solar-array pitch angle (articulation)"),
-    "albedo_scale": Known("a", "", None, Uniform(0.1, 3.0),
-                          "factor on every material's reflectance (degenerate with a free magnitude offset)"),
-    "roughness": Known("r", "", None, Uniform(0.05, 1.0),
-                       "roughness (Blender's, alpha = r^2) of every glossy material"),
-    "jitter_mag": Known("s_jit", "mag", None, Uniform(0.0, 1.0),
-                        "extra Gaussian scatter added in quadrature to the observed errors"),
-})
+KNOWN: Mapping[str, Known] = MappingProxyType(
+    {
+        "spin_period_s": Known("P", "s", None, Uniform(0.5, 1000.0), "spin period about the body spin axis"),
+        "spin_phase_deg": Known(
+            "phi", "deg", 360.0, Uniform(0.0, 360.0), "spin phase at the reference epoch (the pass mid-time)"
+        ),
+        "precession_period_s": Known(
+            "P_pr", "s", None, Uniform(50.0, 5000.0), "period of the spin axis around the precession cone"
+        ),
+        "precession_phase_deg": Known(
+            "phi_pr", "deg", 360.0, Uniform(0.0, 360.0), "precession phase at the reference epoch (the pass mid-time)"
+        ),
+        "precession_angle_deg": Known(
+            "theta",
+            "deg",
+            None,
+            Uniform(0.0, 90.0),
+            "half-angle of the precession cone about the satellite-to-Earth-centre direction",
+        ),
+        "pole_ra_deg": Known(
+            "RA_pole", "deg", 360.0, Uniform(0.0, 360.0), "right ascension of an inertial spin pole (GCRS)"
+        ),
+        "pole_dec_deg": Known(
+            "Dec_pole", "deg", None, Uniform(-90.0, 90.0), "declination of an inertial spin pole (GCRS)"
+        ),
+        "inertia_ratio_2": Known(
+            "I2/I1", "", None, Uniform(0.2, 5.0), "principal moment about body y over that about x"
+        ),
+        "inertia_ratio_3": Known(
+            "I3/I1", "", None, Uniform(0.2, 5.0), "principal moment about body z over that about x"
+        ),
+        "omega_polar_deg": Known(
+            "omega_pol",
+            "deg",
+            None,
+            Uniform(0.0, 180.0),
+            "angle of the angular velocity from body +z at the epoch (torque-free body)",
+        ),
+        "omega_azimuth_deg": Known(
+            "omega_az",
+            "deg",
+            360.0,
+            Uniform(0.0, 360.0),
+            "azimuth of the angular velocity from body +x toward +y at the epoch",
+        ),
+        "panel_pitch_deg": Known("pitch", "deg", None, Uniform(-90.0, 90.0), "solar-array pitch angle (articulation)"),
+        "albedo_scale": Known(
+            "a",
+            "",
+            None,
+            Uniform(0.1, 3.0),
+            "factor on every material's reflectance (degenerate with a free magnitude offset)",
+        ),
+        "roughness": Known(
+            "r", "", None, Uniform(0.05, 1.0), "roughness (Blender's, alpha = r^2) of every glossy material"
+        ),
+        "jitter_mag": Known(
+            "s_jit", "mag", None, Uniform(0.0, 1.0), "extra Gaussian scatter added in quadrature to the observed errors"
+        ),
+    }
+)
 
 
 @dataclass(frozen=True)
@@ -102,7 +138,7 @@ class Parameter:
         return f"{known.label} [{known.unit}]" if known.unit else known.label
 
     @classmethod
-    def default(cls, name: str) -> "Parameter":
+    def default(cls, name: str) -> Parameter:
         """The parameter with its default prior from `KNOWN`."""
         if name not in KNOWN:
             raise ValueError(f"unknown parameter {name!r}; known parameters: {', '.join(KNOWN)}")
@@ -230,7 +266,7 @@ class ParameterSpace:
         return samples
 
     # -- new spaces -----------------------------------------------------------------------
-    def with_prior(self, name: str, prior: Prior) -> "ParameterSpace":
+    def with_prior(self, name: str, prior: Prior) -> ParameterSpace:
         """A copy with `name` free under `prior` (added at the end when it was not free)."""
         fixed = {k: v for k, v in self.fixed.items() if k != name}
         if name in self.names:
@@ -239,14 +275,14 @@ class ParameterSpace:
             free = self.free + (Parameter(name, prior),)
         return ParameterSpace(free, fixed)
 
-    def with_fixed(self, name: str, value: float) -> "ParameterSpace":
+    def with_fixed(self, name: str, value: float) -> ParameterSpace:
         """A copy with `name` pinned to `value`."""
         fixed = dict(self.fixed)
         fixed[name] = value
         return ParameterSpace(tuple(p for p in self.free if p.name != name), fixed)
 
     @classmethod
-    def from_names(cls, names: Iterable[str], fixed: Mapping[str, float] | None = None) -> "ParameterSpace":
+    def from_names(cls, names: Iterable[str], fixed: Mapping[str, float] | None = None) -> ParameterSpace:
         """Free parameters with their default priors, plus fixed values."""
         return cls(tuple(Parameter.default(n) for n in names), fixed or {})
 
@@ -256,7 +292,7 @@ class ParameterSpace:
         return {"free": [{"name": p.name, "prior": p.prior.to_dict()} for p in self.free], "fixed": dict(self.fixed)}
 
     @classmethod
-    def from_dict(cls, record: Mapping) -> "ParameterSpace":
+    def from_dict(cls, record: Mapping) -> ParameterSpace:
         """Inverse of `to_dict`."""
         free = tuple(Parameter(item["name"], prior_from_dict(item["prior"], item["name"])) for item in record["free"])
         return cls(free, dict(record.get("fixed", {})))

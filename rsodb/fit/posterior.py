@@ -3,11 +3,13 @@
 A `Posterior` is a picklable callable ``theta (ndim,) -> float``; emcee's process pool
 receives it once per worker (see `rsodb.fit.sampler`).
 """
+
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 import math
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 

@@ -9,11 +9,12 @@ what the sampler is never allowed to leave.
 >>> Uniform(9.0, 11.0).log_prob(10.0) == -np.log(2.0)
 True
 """
+
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 import math
-from typing import Mapping
 
 import numpy as np
 from scipy import special, stats
@@ -116,8 +117,9 @@ class BoundedNormal:
         return self.low, self.high
 
     def _frozen(self):
-        return stats.truncnorm((self.low - self.mean) / self.sigma, (self.high - self.mean) / self.sigma,
-                               loc=self.mean, scale=self.sigma)
+        return stats.truncnorm(
+            (self.low - self.mean) / self.sigma, (self.high - self.mean) / self.sigma, loc=self.mean, scale=self.sigma
+        )
 
     def log_prob(self, x):
         """Log density at `x` (scalar or array); ``-inf`` outside the support."""

@@ -27,17 +27,21 @@ The summary uses circular statistics for wrapped angles (see
 percentiles are on the same unrolled branch, so ``p16 <= median <= p84`` may exceed the
 window by up to half a period.
 """
+
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 import json
 import math
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
 from rsodb.fit.parameters import KNOWN, ParameterSpace
+from rsodb.fit.sampler import autocorr_time
+from rsodb.storage import attr_text, to_json
 
 __all__ = ["FitResult", "SCHEMA_VERSION", "MAX_STORED_SAMPLES", "assess_convergence"]
 
@@ -72,8 +76,10 @@ def assess_convergence(n_kept: int, autocorr_time: np.ndarray, acceptance: np.nd
     stuck = int(np.sum(acceptance < 0.05))
     problems = []
     if lengths < MIN_AUTOCORR_LENGTHS:
-        problems.append(f"the kept chain is only {lengths:.1f} autocorrelation times long "
-                        f"({MIN_AUTOCORR_LENGTHS} wanted; tau = {tau:.0f} steps)")
+        problems.append(
+            f"the kept chain is only {lengths:.1f} autocorrelation times long "
+            f"({MIN_AUTOCORR_LENGTHS} wanted; tau = {tau:.0f} steps)"
+        )
     low, high = ACCEPTANCE_RANGE
     if not low <= mean_acceptance <= high:
         problems.append(f"mean acceptance {mean_acceptance:.2f} is outside {low}-{high}")
@@ -81,12 +87,10 @@ def assess_convergence(n_kept: int, autocorr_time: np.ndarray, acceptance: np.nd
         problems.append(f"{stuck} walker(s) accepted under 5% of proposals (stuck)")
     if problems:
         return False, "not converged: " + "; ".join(problems) + ". Run more steps (a rerun resumes the chain)."
-    return True, (f"converged: the kept chain is {lengths:.0f} autocorrelation times long (tau = {tau:.0f} steps), "
-                  f"mean acceptance {mean_acceptance:.2f}")
-
-
-def _json(value) -> str:
-    return json.dumps(value, sort_keys=True, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o))
+    return True, (
+        f"converged: the kept chain is {lengths:.0f} autocorrelation times long (tau = {tau:.0f} steps), "
+        f"mean acceptance {mean_acceptance:.2f}"
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -173,8 +177,18 @@ class FitResult:
     created_utc: str = ""
 
     def __post_init__(self):
-        for name in ("median", "p16", "p84", "best", "autocorr_time", "acceptance_fraction", "mag_obs",
-                     "mag_err", "mag_model", "samples"):
+        for name in (
+            "median",
+            "p16",
+            "p84",
+            "best",
+            "autocorr_time",
+            "acceptance_fraction",
+            "mag_obs",
+            "mag_err",
+            "mag_model",
+            "samples",
+        ):
             value = np.array(getattr(self, name), dtype=float)
             value.setflags(write=False)
             object.__setattr__(self, name, value)
@@ -216,12 +230,16 @@ class FitResult:
         rows = [f"{'parameter':<22} {'median':>12} {'-err':>10} {'+err':>10}   best"]
         for i, name in enumerate(self.names):
             unit = KNOWN[name].unit
-            rows.append(f"{name:<22} {self.median[i]:12.5g} {self.median[i] - self.p16[i]:10.3g} "
-                        f"{self.p84[i] - self.median[i]:10.3g}   {self.best[i]:.5g} {unit}")
+            rows.append(
+                f"{name:<22} {self.median[i]:12.5g} {self.median[i] - self.p16[i]:10.3g} "
+                f"{self.p84[i] - self.median[i]:10.3g}   {self.best[i]:.5g} {unit}"
+            )
         for name, value in self.space.fixed.items():
             rows.append(f"{name:<22} {value:12.5g} {'(fixed)':>10}")
-        rows.append(f"residual RMS {self.residual_rms_mag:.3f} mag, reduced chi2 {self.reduced_chi2:.2f} "
-                    f"(observed errors), jitter {self.jitter_mag:.3f} mag, offset {self.offset_mag:+.3f} mag")
+        rows.append(
+            f"residual RMS {self.residual_rms_mag:.3f} mag, reduced chi2 {self.reduced_chi2:.2f} "
+            f"(observed errors), jitter {self.jitter_mag:.3f} mag, offset {self.offset_mag:+.3f} mag"
+        )
         rows.append(self.verdict)
         rows.extend(f"warning: {flag}" for flag in self.flags)
         return "\n".join(rows)
@@ -229,26 +247,54 @@ class FitResult:
     def to_dict(self) -> dict:
         """JSON-friendly summary (no per-sample arrays)."""
         return {
-            "pass_id": self.pass_id, "name": self.name, "likelihood": self.likelihood,
-            "parameters": {n: {"median": float(self.median[i]), "p16": float(self.p16[i]),
-                               "p84": float(self.p84[i]), "best": float(self.best[i]),
-                               "autocorr_time": float(self.autocorr_time[i])}
-                           for i, n in enumerate(self.names)},
+            "pass_id": self.pass_id,
+            "name": self.name,
+            "likelihood": self.likelihood,
+            "parameters": {
+                n: {
+                    "median": float(self.median[i]),
+                    "p16": float(self.p16[i]),
+                    "p84": float(self.p84[i]),
+                    "best": float(self.best[i]),
+                    "autocorr_time": float(self.autocorr_time[i]),
+                }
+                for i, n in enumerate(self.names)
+            },
             "fixed": dict(self.space.fixed),
-            "offset_mag": self.offset_mag, "jitter_mag": self.jitter_mag,
-            "residual_rms_mag": self.residual_rms_mag, "chi2": self.chi2, "dof": self.dof,
-            "reduced_chi2": self.reduced_chi2, "n_samples": int(self.mag_obs.size),
-            "n_steps": self.n_steps, "n_walkers": self.n_walkers, "discard": self.discard,
+            "offset_mag": self.offset_mag,
+            "jitter_mag": self.jitter_mag,
+            "residual_rms_mag": self.residual_rms_mag,
+            "chi2": self.chi2,
+            "dof": self.dof,
+            "reduced_chi2": self.reduced_chi2,
+            "n_samples": int(self.mag_obs.size),
+            "n_steps": self.n_steps,
+            "n_walkers": self.n_walkers,
+            "discard": self.discard,
             "mean_acceptance": float(np.mean(self.acceptance_fraction)),
-            "converged": self.converged, "verdict": self.verdict, "flags": list(self.flags),
-            "chain_path": self.chain_path, "elapsed_s": self.elapsed_s, "n_evaluations": self.n_evaluations,
-            "start_utc": str(self.time_utc[0]), "created_utc": self.created_utc,
+            "converged": self.converged,
+            "verdict": self.verdict,
+            "flags": list(self.flags),
+            "chain_path": self.chain_path,
+            "elapsed_s": self.elapsed_s,
+            "n_evaluations": self.n_evaluations,
+            "start_utc": str(self.time_utc[0]),
+            "created_utc": self.created_utc,
         }
 
     # -- construction ---------------------------------------------------------------------------
     @classmethod
-    def from_run(cls, run, posterior, *, pass_id: str, name: str, time_utc, discard: int | None = None,
-                 config: Mapping | None = None) -> "FitResult":
+    def from_run(
+        cls,
+        run,
+        posterior,
+        *,
+        pass_id: str,
+        name: str,
+        time_utc,
+        discard: int | None = None,
+        config: Mapping | None = None,
+    ) -> FitResult:
         """Summarise a `ChainRun` of `posterior`.
 
         Parameters
@@ -264,8 +310,6 @@ class FitResult:
         config : mapping, optional
             The fit configuration, stored for provenance.
         """
-        from rsodb.fit.sampler import autocorr_time
-
         space = posterior.space
         n_steps = run.n_steps
         discard = n_steps // 2 if discard is None else int(discard)
@@ -295,14 +339,20 @@ class FitResult:
         if likelihood.kind == "gaussian" and dof > 0 and chi2 / dof > MISFIT_REDUCED_CHI2:
             median_err = float(np.median(likelihood.mag_err))
             flags.append(
-                f"model misfit: the best fit leaves residuals of RMS {np.sqrt(np.mean(residuals ** 2)):.3f} mag "
+                f"model misfit: the best fit leaves residuals of RMS {np.sqrt(np.mean(residuals**2)):.3f} mag "
                 f"against a median quoted error of {median_err:.3f} mag (reduced chi2 {chi2 / dof:.1f}); "
-                + (f"the jitter term ({jitter:.3f} mag) absorbs the difference, so the intervals "
-                   "describe this model's best compromise, not the object" if "jitter_mag" in space.names
-                   else "without a jitter term the intervals are too narrow"))
+                + (
+                    f"the jitter term ({jitter:.3f} mag) absorbs the difference, so the intervals "
+                    "describe this model's best compromise, not the object"
+                    if "jitter_mag" in space.names
+                    else "without a jitter term the intervals are too narrow"
+                )
+            )
         if likelihood.kind == "normalised":
-            flags.append("normalised comparison (the published workflow's): observed errors are ignored "
-                         "and the intervals are not calibrated")
+            flags.append(
+                "normalised comparison (the published workflow's): observed errors are ignored "
+                "and the intervals are not calibrated"
+            )
 
         # Thin along the steps, keeping every walker: a stride over the flattened (step, walker)
         # order would keep only some walkers (every other one for a stride of 2), which skews
@@ -310,18 +360,39 @@ class FitResult:
         step_stride = max(1, math.ceil(kept.shape[0] * kept.shape[1] / MAX_STORED_SAMPLES))
         stored = flat.reshape(kept.shape)[::step_stride][: max(1, MAX_STORED_SAMPLES // kept.shape[1])]
         return cls(
-            pass_id=pass_id, name=name, space=space, likelihood=likelihood.kind,
-            median=median_wrapped, p16=p16 + shift, p84=p84 + shift, best=best,
-            best_log_prob=float(run.log_prob[best_index]), autocorr_time=tau,
-            acceptance_fraction=run.acceptance_fraction, n_steps=n_steps, n_walkers=run.n_walkers,
-            discard=discard, converged=converged, verdict=verdict, flags=tuple(flags),
-            time_utc=time_utc, mag_obs=likelihood.mag_obs, mag_err=likelihood.mag_err, mag_model=mag_model,
-            offset_mag=float(offset), jitter_mag=jitter, residual_rms_mag=float(np.sqrt(np.mean(residuals ** 2))),
-            chi2=chi2, dof=dof, samples=stored.reshape(-1, space.ndim), chain_path=run.chain_path,
+            pass_id=pass_id,
+            name=name,
+            space=space,
+            likelihood=likelihood.kind,
+            median=median_wrapped,
+            p16=p16 + shift,
+            p84=p84 + shift,
+            best=best,
+            best_log_prob=float(run.log_prob[best_index]),
+            autocorr_time=tau,
+            acceptance_fraction=run.acceptance_fraction,
+            n_steps=n_steps,
+            n_walkers=run.n_walkers,
+            discard=discard,
+            converged=converged,
+            verdict=verdict,
+            flags=tuple(flags),
+            time_utc=time_utc,
+            mag_obs=likelihood.mag_obs,
+            mag_err=likelihood.mag_err,
+            mag_model=mag_model,
+            offset_mag=float(offset),
+            jitter_mag=jitter,
+            residual_rms_mag=float(np.sqrt(np.mean(residuals**2))),
+            chi2=chi2,
+            dof=dof,
+            samples=stored.reshape(-1, space.ndim),
+            chain_path=run.chain_path,
             elapsed_s=run.elapsed_s,
             n_evaluations=int(run.n_walkers * run.steps_run + run.init.get("evaluations", 0)),
-            init=dict(run.init), config=dict(config or {}),
-            created_utc=datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
+            init=dict(run.init),
+            config=dict(config or {}),
+            created_utc=datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
         )
 
     # -- HDF5 ---------------------------------------------------------------------------------
@@ -338,19 +409,29 @@ class FitResult:
         for key in ("dof", "n_steps", "n_walkers", "discard", "n_evaluations"):
             attrs[key] = int(getattr(self, key))
         attrs["converged"] = bool(self.converged)
-        attrs["space"] = _json(self.space.to_dict())
-        attrs["config"] = _json(self.config)
-        attrs["init"] = _json(self.init)
-        attrs["flags"] = _json(list(self.flags))
+        attrs["space"] = to_json(self.space.to_dict(), sort_keys=True)
+        attrs["config"] = to_json(self.config, sort_keys=True)
+        attrs["init"] = to_json(self.init, sort_keys=True)
+        attrs["flags"] = to_json(list(self.flags), sort_keys=True)
         width = max(len(n) for n in self.names)
-        summary = np.zeros(len(self.names), dtype=[("name", f"S{width}"), ("median", "f8"), ("p16", "f8"),
-                                                   ("p84", "f8"), ("best", "f8"), ("autocorr_time", "f8")])
+        summary = np.zeros(
+            len(self.names),
+            dtype=[
+                ("name", f"S{width}"),
+                ("median", "f8"),
+                ("p16", "f8"),
+                ("p84", "f8"),
+                ("best", "f8"),
+                ("autocorr_time", "f8"),
+            ],
+        )
         summary["name"] = [n.encode() for n in self.names]
         for key in ("median", "p16", "p84", "best", "autocorr_time"):
             summary[key] = getattr(self, key)
         group.create_dataset("summary", data=summary)
-        curve = np.zeros(self.mag_obs.size, dtype=[("time_utc", "i8"), ("mag_obs", "f8"), ("mag_err", "f8"),
-                                                   ("mag_model", "f8")])
+        curve = np.zeros(
+            self.mag_obs.size, dtype=[("time_utc", "i8"), ("mag_obs", "f8"), ("mag_err", "f8"), ("mag_model", "f8")]
+        )
         curve["time_utc"] = self.time_utc.view("i8")
         curve["mag_obs"], curve["mag_err"], curve["mag_model"] = self.mag_obs, self.mag_err, self.mag_model
         group.create_dataset("lightcurve", data=curve, compression="gzip")
@@ -358,32 +439,53 @@ class FitResult:
         group.create_dataset("acceptance_fraction", data=self.acceptance_fraction)
 
     @classmethod
-    def from_hdf5(cls, group) -> "FitResult":
+    def from_hdf5(cls, group) -> FitResult:
         """Read what `to_hdf5` wrote."""
         attrs = group.attrs
         version = int(attrs.get("schema_version", -1))
         if version != SCHEMA_VERSION:
-            raise ValueError(f"fit record {group.name} has schema_version {version}; this rsodb reads "
-                             f"{SCHEMA_VERSION} (refit the pass or upgrade rsodb)")
+            raise ValueError(
+                f"fit record {group.name} has schema_version {version}; this rsodb reads "
+                f"{SCHEMA_VERSION} (refit the pass or upgrade rsodb)"
+            )
 
         def text(key):
-            value = attrs[key]
-            return value.decode() if isinstance(value, bytes) else str(value)
+            return attr_text(attrs[key])
 
         summary = group["summary"][...]
         curve = group["lightcurve"][...]
         return cls(
-            pass_id=text("pass_id"), name=text("name"), space=ParameterSpace.from_dict(json.loads(text("space"))),
-            likelihood=text("likelihood"), median=summary["median"], p16=summary["p16"], p84=summary["p84"],
-            best=summary["best"], best_log_prob=float(attrs["best_log_prob"]),
-            autocorr_time=summary["autocorr_time"], acceptance_fraction=group["acceptance_fraction"][...],
-            n_steps=int(attrs["n_steps"]), n_walkers=int(attrs["n_walkers"]), discard=int(attrs["discard"]),
-            converged=bool(attrs["converged"]), verdict=text("verdict"), flags=tuple(json.loads(text("flags"))),
-            time_utc=curve["time_utc"].view("datetime64[ns]"), mag_obs=curve["mag_obs"],
-            mag_err=curve["mag_err"], mag_model=curve["mag_model"], offset_mag=float(attrs["offset_mag"]),
-            jitter_mag=float(attrs["jitter_mag"]), residual_rms_mag=float(attrs["residual_rms_mag"]),
-            chi2=float(attrs["chi2"]), dof=int(attrs["dof"]), samples=group["samples"][...],
-            chain_path=text("chain_path"), elapsed_s=float(attrs["elapsed_s"]),
-            n_evaluations=int(attrs["n_evaluations"]), init=json.loads(text("init")),
-            config=json.loads(text("config")), created_utc=text("created_utc"),
+            pass_id=text("pass_id"),
+            name=text("name"),
+            space=ParameterSpace.from_dict(json.loads(text("space"))),
+            likelihood=text("likelihood"),
+            median=summary["median"],
+            p16=summary["p16"],
+            p84=summary["p84"],
+            best=summary["best"],
+            best_log_prob=float(attrs["best_log_prob"]),
+            autocorr_time=summary["autocorr_time"],
+            acceptance_fraction=group["acceptance_fraction"][...],
+            n_steps=int(attrs["n_steps"]),
+            n_walkers=int(attrs["n_walkers"]),
+            discard=int(attrs["discard"]),
+            converged=bool(attrs["converged"]),
+            verdict=text("verdict"),
+            flags=tuple(json.loads(text("flags"))),
+            time_utc=curve["time_utc"].view("datetime64[ns]"),
+            mag_obs=curve["mag_obs"],
+            mag_err=curve["mag_err"],
+            mag_model=curve["mag_model"],
+            offset_mag=float(attrs["offset_mag"]),
+            jitter_mag=float(attrs["jitter_mag"]),
+            residual_rms_mag=float(attrs["residual_rms_mag"]),
+            chi2=float(attrs["chi2"]),
+            dof=int(attrs["dof"]),
+            samples=group["samples"][...],
+            chain_path=text("chain_path"),
+            elapsed_s=float(attrs["elapsed_s"]),
+            n_evaluations=int(attrs["n_evaluations"]),
+            init=json.loads(text("init")),
+            config=json.loads(text("config")),
+            created_utc=text("created_utc"),
         )

@@ -8,14 +8,14 @@ config.name)`` (so a killed fit resumes when run again), and stores the `FitResu
 The pieces are separate for campaigns, where workers compute and the client stores:
 `FitProblem.build` (data + posterior, no archive), `fit_problem` (sample + summarise).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
-import math
-from typing import Any
 
 import numpy as np
 
+from raycast.geometry.pass_geometry import PassGeometry
 from rsodb.fit.config import FitConfig
 from rsodb.fit.likelihood import make_likelihood
 from rsodb.fit.model import SpinStateModel
@@ -23,6 +23,7 @@ from rsodb.fit.posterior import Posterior
 from rsodb.fit.result import FitResult
 from rsodb.fit.sampler import run_sampler
 from rsodb.fit.shapes import MATERIAL_PARAMETERS, SHAPES, brightness_for, shape_for_norad
+from rsodb.periods.search import PeriodResult
 
 __all__ = ["FitProblem", "select_samples", "fit_problem", "fit_pass", "load_periods", "reference_range_km"]
 
@@ -83,7 +84,7 @@ class FitProblem:
     search_posterior: Posterior
 
     @classmethod
-    def build(cls, observed, config: FitConfig, periods=None, *, progress: bool = False) -> "FitProblem":
+    def build(cls, observed, config: FitConfig, periods=None, *, progress: bool = False) -> FitProblem:
         """Data selection, geometry, shape, priors and likelihood for one pass.
 
         Parameters
@@ -96,65 +97,84 @@ class FitProblem:
         progress : bool
             Progress bar while a shape cache is built.
         """
-        from raycast.geometry import PassGeometry
-        from raycast.orbit import Satellite
-
         pass_id = getattr(observed, "pass_id", "") or observed.source_name
         chosen = select_samples(observed, config.data)
         n = int(chosen.sum())
         if n < 10:
             raise ValueError(
                 f"pass {pass_id}: only {n} usable samples in the chosen window; a fit needs at least 10 "
-                "(check [data] start_s/duration_s/stride, or keep_saturated)")
+                "(check [data] start_s/duration_s/stride, or keep_saturated)"
+            )
         shape = shape_for_norad(observed.norad) if config.model.shape == "auto" else config.model.shape
         space = config.parameter_space(SHAPES[shape].articulations, periods)
         brightness_names = set(SHAPES[shape].articulations) | set(MATERIAL_PARAMETERS)
         free_bounds = {p.name: p.prior.bounds for p in space.free if p.name in brightness_names}
         fixed = {k: v for k, v in space.fixed.items() if k in brightness_names}
         brightness, brightness_parameters = brightness_for(
-            shape, free_bounds, fixed, renderer=config.model.renderer, accuracy_mag=config.model.accuracy_mag,
-            progress=progress)
-        if observed.tle:
-            satellite = Satellite.from_tle(observed.tle)
-        elif observed.omm:
-            satellite = Satellite.from_omm(observed.omm)
-        else:
-            raise ValueError(f"pass {pass_id} carries no TLE or OMM, so its geometry cannot be computed")
+            shape,
+            free_bounds,
+            fixed,
+            renderer=config.model.renderer,
+            accuracy_mag=config.model.accuracy_mag,
+            progress=progress,
+        )
         # The fastest spin the prior allows sets the exposure sub-sampling (2 deg per sub-sample).
         period_guess = dict(space.fixed, **{p.name: p.prior.low for p in space.free}).get("spin_period_s")
 
         def posterior_on(index: np.ndarray, n_sub: int | None) -> Posterior:
-            geometry = PassGeometry.compute(satellite, observed.site, observed.time_utc[index], observed.exposure_s,
-                                            n_sub=n_sub, spin_period_s=period_guess if period_guess else None)
-            model = SpinStateModel(geometry, brightness, config.model.attitude, config.model.attitude_settings,
-                                   brightness_parameters, observed.band, reference_range_km(observed))
+            geometry = PassGeometry.from_pass(
+                observed, n_sub=n_sub, spin_period_s=period_guess if period_guess else None, samples=index
+            )
+            model = SpinStateModel(
+                geometry,
+                brightness,
+                config.model.attitude,
+                config.model.attitude_settings,
+                brightness_parameters,
+                observed.band,
+                reference_range_km(observed),
+            )
             err = np.maximum(observed.mag_err[index], config.data.mag_err_floor)
-            likelihood = make_likelihood(config.likelihood.kind, observed.best_mag[index], err,
-                                         config.likelihood.offset)
+            likelihood = make_likelihood(
+                config.likelihood.kind, observed.best_mag[index], err, config.likelihood.offset
+            )
             return Posterior(space, model, likelihood)
 
         index = np.flatnonzero(chosen)
         posterior = posterior_on(index, config.model.n_sub or None)
         coarse = index[np.unique(np.linspace(0, n - 1, min(n, config.sampler.search_points)).round().astype(int))]
-        search_posterior = posterior_on(coarse, 1) if coarse.size < n or posterior.model.geometry.n_sub > 1 \
-            else posterior
+        search_posterior = (
+            posterior_on(coarse, 1) if coarse.size < n or posterior.model.geometry.n_sub > 1 else posterior
+        )
         return cls(pass_id, config, shape, posterior, observed.time_utc[chosen], search_posterior)
 
 
 def fit_problem(problem: FitProblem, chain_path, *, restart: bool = False, progress: bool = True) -> FitResult:
     """Sample a prepared problem (chain at `chain_path`, resumed when present) and summarise it."""
     config = problem.config
-    run = run_sampler(problem.posterior, config.sampler, chain_path, restart=restart, progress=progress,
-                      description=f"fit {problem.pass_id}", search_posterior=problem.search_posterior)
+    run = run_sampler(
+        problem.posterior,
+        config.sampler,
+        chain_path,
+        restart=restart,
+        progress=progress,
+        description=f"fit {problem.pass_id}",
+        search_posterior=problem.search_posterior,
+    )
     record = dict(config.to_dict(), shape=problem.shape)
-    return FitResult.from_run(run, problem.posterior, pass_id=problem.pass_id, name=config.name,
-                              time_utc=problem.time_utc, discard=config.discard, config=record)
+    return FitResult.from_run(
+        run,
+        problem.posterior,
+        pass_id=problem.pass_id,
+        name=config.name,
+        time_utc=problem.time_utc,
+        discard=config.discard,
+        config=record,
+    )
 
 
 def load_periods(archive, pass_id: str):
     """The pass's stored `PeriodResult`, or None when it has none."""
-    from rsodb.periods import PeriodResult
-
     if PERIODS_RESULT_NAME not in archive.result_names(pass_id, "periods"):
         return None
     return archive.load_result(pass_id, "periods", PERIODS_RESULT_NAME, PeriodResult.from_hdf5)
@@ -165,8 +185,16 @@ def _needs_periods(config: FitConfig) -> bool:
     return isinstance(spec, dict) and spec.get("from") == "periods"
 
 
-def fit_pass(archive, pass_id: str, config: FitConfig | None = None, *, restart: bool = False,
-             progress: bool = True, store: bool = True) -> FitResult:
+def fit_pass(
+    archive,
+    pass_id: str,
+    config: FitConfig | None = None,
+    *,
+    periods: PeriodResult | None = None,
+    restart: bool = False,
+    progress: bool = True,
+    store: bool = True,
+) -> FitResult:
     """Fit one stored pass and store the result in the archive.
 
     Parameters
@@ -176,6 +204,8 @@ def fit_pass(archive, pass_id: str, config: FitConfig | None = None, *, restart:
         The pass (a unique prefix is enough).
     config : FitConfig, optional
         Default: `FitConfig()`.
+    periods : PeriodResult, optional
+        The pass's period, for the spin-period prior; default: the one stored in the archive.
     restart : bool
         Discard a stored chain of this fit instead of resuming it.
     progress : bool
@@ -189,10 +219,10 @@ def fit_pass(archive, pass_id: str, config: FitConfig | None = None, *, restart:
     """
     config = config or FitConfig()
     observed = archive.get(pass_id)
-    periods = load_periods(archive, observed.pass_id) if _needs_periods(config) else None
+    if periods is None and _needs_periods(config):
+        periods = load_periods(archive, observed.pass_id)
     problem = FitProblem.build(observed, config, periods, progress=progress)
-    result = fit_problem(problem, archive.chain_path(observed.pass_id, config.name), restart=restart,
-                         progress=progress)
+    result = fit_problem(problem, archive.chain_path(observed.pass_id, config.name), restart=restart, progress=progress)
     if store:
         archive.store_result(observed.pass_id, "fits", config.name, result)
     return result

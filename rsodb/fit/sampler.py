@@ -17,8 +17,11 @@
 - with ``processes > 1`` the log posterior runs in a ``multiprocessing`` pool whose workers
   receive the posterior once, at start-up, rather than with every batch of walkers.
 """
+
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field
 import json
 import math
@@ -27,9 +30,14 @@ import os
 from pathlib import Path
 import shutil
 import time
-from typing import Any, Callable, Mapping
+from typing import Any
 
+import emcee
+from emcee.autocorr import integrated_time
+import h5py
 import numpy as np
+from scipy.optimize import differential_evolution, minimize
+from tqdm.auto import tqdm
 
 __all__ = ["SamplerSettings", "ChainRun", "run_sampler", "INITIALISERS", "read_chain"]
 
@@ -102,7 +110,9 @@ class SamplerSettings:
         if self.init not in INITIALISERS:
             raise ValueError(f"sampler setting init={self.init!r} is not one of {', '.join(INITIALISERS)}")
         if not (isinstance(self.processes, (int, np.integer)) and self.processes >= 0):
-            raise ValueError(f"sampler setting processes={self.processes!r} must be 0 (all cores) or a positive integer")
+            raise ValueError(
+                f"sampler setting processes={self.processes!r} must be 0 (all cores) or a positive integer"
+            )
         if not (isinstance(self.seed, (int, np.integer)) and self.seed >= 0):
             raise ValueError(f"sampler setting seed={self.seed!r} must be a non-negative integer")
         if not (0 < self.ball_fraction < 1):
@@ -116,13 +126,13 @@ class SamplerSettings:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, record: Mapping) -> "SamplerSettings":
+    def from_dict(cls, record: Mapping) -> SamplerSettings:
         unknown = sorted(set(record) - set(cls.__dataclass_fields__))
         if unknown:
             raise ValueError(f"unknown sampler settings {unknown}; known: {', '.join(cls.__dataclass_fields__)}")
         return cls(**record)
 
-    def replace(self, **changes) -> "SamplerSettings":
+    def replace(self, **changes) -> SamplerSettings:
         return SamplerSettings(**{**asdict(self), **changes})
 
 
@@ -252,7 +262,6 @@ class _ProcessPool:
 def _open_pool(posterior, search_posterior, processes: int) -> _ProcessPool | None:
     if processes <= 1:
         return None
-    from concurrent.futures import ProcessPoolExecutor
 
     # Each worker is one of `processes` on a small machine: one BLAS/OpenMP thread each, or
     # they fight over the cores. The executor spawns its workers lazily, so the variables stay
@@ -261,8 +270,12 @@ def _open_pool(posterior, search_posterior, processes: int) -> _ProcessPool | No
     os.environ.update(_SINGLE_THREAD_ENV)
     # spawn, not fork: the parent may hold threads (tqdm, Dask, Open3D) that fork would copy
     # in a locked state.
-    executor = ProcessPoolExecutor(processes, mp_context=multiprocessing.get_context("spawn"),
-                                   initializer=_install_worker, initargs=(posterior, search_posterior))
+    executor = ProcessPoolExecutor(
+        processes,
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=_install_worker,
+        initargs=(posterior, search_posterior),
+    )
     return _ProcessPool(executor, processes, saved)
 
 
@@ -275,8 +288,9 @@ def _reflect_into(theta: np.ndarray, bounds: np.ndarray, periods: np.ndarray) ->
     return np.where(np.isnan(periods), reflected, theta)
 
 
-def _finite_or_redraw(evaluator: _Evaluator, draw: Callable[[int], np.ndarray], n: int, what: str,
-                      attempts: int = 50) -> tuple[np.ndarray, int]:
+def _finite_or_redraw(
+    evaluator: _Evaluator, draw: Callable[[int], np.ndarray], n: int, what: str, attempts: int = 50
+) -> tuple[np.ndarray, int]:
     """n positions with a finite log posterior, redrawing the others; (positions, evaluations)."""
     positions = draw(n)
     values = np.array(list(evaluator.map(evaluator.log_prob, positions)))
@@ -294,11 +308,13 @@ def _finite_or_redraw(evaluator: _Evaluator, draw: Callable[[int], np.ndarray], 
     )
 
 
-def init_from_prior(posterior, settings: SamplerSettings, rng: np.random.Generator,
-                    evaluator: _Evaluator) -> tuple[np.ndarray, dict]:
+def init_from_prior(
+    posterior, settings: SamplerSettings, rng: np.random.Generator, evaluator: _Evaluator
+) -> tuple[np.ndarray, dict]:
     """Walkers drawn independently from the prior."""
     positions, evaluations = _finite_or_redraw(
-        evaluator, lambda k: posterior.space.sample_prior(rng, k), settings.n_walkers, "in the prior")
+        evaluator, lambda k: posterior.space.sample_prior(rng, k), settings.n_walkers, "in the prior"
+    )
     return positions, {"method": "prior", "evaluations": evaluations}
 
 
@@ -307,33 +323,50 @@ def _search(posterior, settings: SamplerSettings, rng: np.random.Generator, eval
 
     Returns (result, best, best_cost, polish evaluations).
     """
-    from scipy.optimize import differential_evolution, minimize
-
     space = posterior.space
     bounds = space.bounds
     result = differential_evolution(
-        evaluator.cost, bounds, maxiter=settings.search_maxiter, popsize=settings.search_popsize,
-        strategy=settings.search_strategy, seed=int(rng.integers(2**31)), polish=False, init="sobol", tol=1e-8,
+        evaluator.cost,
+        bounds,
+        maxiter=settings.search_maxiter,
+        popsize=settings.search_popsize,
+        strategy=settings.search_strategy,
+        seed=int(rng.integers(2**31)),
+        polish=False,
+        init="sobol",
+        tol=1e-8,
         # "deferred" updating evaluates whole generations through `map`: the same search
         # whether it runs here or in the pool.
-        workers=evaluator.map, updating="deferred",
+        workers=evaluator.map,
+        updating="deferred",
     )
     if result.fun >= _IMPOSSIBLE:
         raise RuntimeError("the global search found no point where the posterior is non-zero; widen the priors")
     # Polish here, in this process (scipy's own polish would call the pool-only cost function).
-    polished = minimize(_Cost(evaluator.search_posterior), result.x, method="L-BFGS-B", bounds=bounds,
-                        options={"maxfun": 30 * space.ndim})
+    polished = minimize(
+        _Cost(evaluator.search_posterior),
+        result.x,
+        method="L-BFGS-B",
+        bounds=bounds,
+        options={"maxfun": 30 * space.ndim},
+    )
     best, best_cost = (polished.x, polished.fun) if polished.fun < result.fun else (result.x, result.fun)
     return result, best, best_cost, int(polished.nfev)
 
 
 def _search_info(method, result, best, best_cost, evaluations) -> dict:
-    return {"method": method, "evaluations": evaluations, "search_best_log_prob": float(-best_cost),
-            "search_best": best.tolist(), "search_generations": int(result.nit)}
+    return {
+        "method": method,
+        "evaluations": evaluations,
+        "search_best_log_prob": float(-best_cost),
+        "search_best": best.tolist(),
+        "search_generations": int(result.nit),
+    }
 
 
-def init_from_search(posterior, settings: SamplerSettings, rng: np.random.Generator,
-                     evaluator: _Evaluator) -> tuple[np.ndarray, dict]:
+def init_from_search(
+    posterior, settings: SamplerSettings, rng: np.random.Generator, evaluator: _Evaluator
+) -> tuple[np.ndarray, dict]:
     """Walkers in a small ball around the best point of a differential-evolution search.
 
     The search minimises ``evaluator.cost`` (minus the coarse search posterior) and polishes
@@ -349,12 +382,14 @@ def init_from_search(posterior, settings: SamplerSettings, rng: np.random.Genera
         return _reflect_into(theta, bounds, space.periods)
 
     positions, evaluations = _finite_or_redraw(evaluator, ball, settings.n_walkers, "around the search's best point")
-    return positions, _search_info("search", result, best, best_cost,
-                                   int(result.nfev) + polish_evaluations + evaluations)
+    return positions, _search_info(
+        "search", result, best, best_cost, int(result.nfev) + polish_evaluations + evaluations
+    )
 
 
-def init_from_population(posterior, settings: SamplerSettings, rng: np.random.Generator,
-                         evaluator: _Evaluator) -> tuple[np.ndarray, dict]:
+def init_from_population(
+    posterior, settings: SamplerSettings, rng: np.random.Generator, evaluator: _Evaluator
+) -> tuple[np.ndarray, dict]:
     """Walkers at the polished best point and the best other members of the search's last population.
 
     Members whose posterior is zero are replaced by points in a small ball around the best.
@@ -371,27 +406,28 @@ def init_from_population(posterior, settings: SamplerSettings, rng: np.random.Ge
     bounds = space.bounds
     width = (bounds[:, 1] - bounds[:, 0]) * settings.ball_fraction
     while positions.shape[0] < settings.n_walkers:
-        positions = np.vstack([positions, _reflect_into(best + width * rng.standard_normal(space.ndim), bounds,
-                                                        space.periods)[None, :]])
+        positions = np.vstack(
+            [positions, _reflect_into(best + width * rng.standard_normal(space.ndim), bounds, space.periods)[None, :]]
+        )
     values = np.array(list(evaluator.map(evaluator.log_prob, positions)))
     bad = ~np.isfinite(values)
     evaluations = settings.n_walkers
     if bad.any():
+
         def ball(k: int) -> np.ndarray:
             return _reflect_into(best + width * rng.standard_normal((k, space.ndim)), bounds, space.periods)
 
         positions[bad], extra = _finite_or_redraw(evaluator, ball, int(bad.sum()), "around the search's best point")
         evaluations += extra
-    return positions, _search_info("population", result, best, best_cost,
-                                   int(result.nfev) + polish_evaluations + evaluations)
+    return positions, _search_info(
+        "population", result, best, best_cost, int(result.nfev) + polish_evaluations + evaluations
+    )
 
 
 INITIALISERS = {"prior": init_from_prior, "search": init_from_search, "population": init_from_population}
 
 
 def _moves(name: str):
-    import emcee
-
     if name == "de":
         return [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)]
     return None  # emcee's default stretch move
@@ -415,8 +451,6 @@ def _atomic_copy(source: Path, target: Path) -> None:
 
 def _stored_iteration(chain_path: Path) -> int | None:
     """Steps stored in the chain file, or None when the file is unreadable."""
-    import h5py
-
     try:
         with h5py.File(chain_path, "r") as handle:
             return int(handle[CHAIN_GROUP].attrs["iteration"])
@@ -426,14 +460,18 @@ def _stored_iteration(chain_path: Path) -> int | None:
 
 def _run_identity(posterior, settings: SamplerSettings) -> dict:
     """What must match for a stored chain to be continued by this run."""
-    return {"names": list(posterior.space.names), "n_walkers": settings.n_walkers, "seed": settings.seed,
-            "init": settings.init, "moves": settings.moves, "space": posterior.space.to_dict()}
+    return {
+        "names": list(posterior.space.names),
+        "n_walkers": settings.n_walkers,
+        "seed": settings.seed,
+        "init": settings.init,
+        "moves": settings.moves,
+        "space": posterior.space.to_dict(),
+    }
 
 
 def _prepare_chain_file(chain_path: Path, identity: dict, restart: bool) -> int:
     """Make `chain_path` usable; return the number of steps it already holds."""
-    import h5py
-
     backup = _backup_path(chain_path)
     if restart:
         for path in (chain_path, backup):
@@ -468,16 +506,22 @@ def _prepare_chain_file(chain_path: Path, identity: dict, restart: bool) -> int:
 
 def read_chain(chain_path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(chain (steps, walkers, ndim), log_prob (steps, walkers), acceptance (walkers,)) from a file."""
-    import emcee
-
     backend = emcee.backends.HDFBackend(str(chain_path), name=CHAIN_GROUP, read_only=True)
     iteration = backend.iteration
     return backend.get_chain(), backend.get_log_prob(), backend.accepted / max(iteration, 1)
 
 
 # -- the entry point ------------------------------------------------------------------------
-def run_sampler(posterior, settings: SamplerSettings, chain_path: str | Path, *, restart: bool = False,
-                progress: bool = True, description: str = "sampling", search_posterior=None) -> ChainRun:
+def run_sampler(
+    posterior,
+    settings: SamplerSettings,
+    chain_path: str | Path,
+    *,
+    restart: bool = False,
+    progress: bool = True,
+    description: str = "sampling",
+    search_posterior=None,
+) -> ChainRun:
     """Run (or resume) emcee on `posterior`, storing the chain in `chain_path`.
 
     Parameters
@@ -503,10 +547,6 @@ def run_sampler(posterior, settings: SamplerSettings, chain_path: str | Path, *,
     -------
     ChainRun
     """
-    import emcee
-    import h5py
-    from tqdm.auto import tqdm
-
     space = posterior.space
     if settings.n_walkers < 2 * space.ndim:
         raise ValueError(
@@ -536,20 +576,33 @@ def run_sampler(posterior, settings: SamplerSettings, chain_path: str | Path, *,
             with h5py.File(chain_path, "a") as handle:
                 handle.attrs["rsodb_run"] = json.dumps(identity)
                 handle.attrs["rsodb_init"] = json.dumps(init_info)
-            sampler = emcee.EnsembleSampler(settings.n_walkers, space.ndim, evaluator.log_prob,
-                                            pool=pool, backend=backend, moves=_moves(settings.moves))
+            sampler = emcee.EnsembleSampler(
+                settings.n_walkers,
+                space.ndim,
+                evaluator.log_prob,
+                pool=pool,
+                backend=backend,
+                moves=_moves(settings.moves),
+            )
             state = emcee.State(positions, random_state=np.random.RandomState(settings.seed).get_state())
         else:
             with h5py.File(chain_path, "r") as handle:
                 init_info = dict(json.loads(handle.attrs.get("rsodb_init", "{}")), resumed_at=stored)
             if remaining:
-                sampler = emcee.EnsembleSampler(settings.n_walkers, space.ndim, evaluator.log_prob,
-                                                pool=pool, backend=backend, moves=_moves(settings.moves))
+                sampler = emcee.EnsembleSampler(
+                    settings.n_walkers,
+                    space.ndim,
+                    evaluator.log_prob,
+                    pool=pool,
+                    backend=backend,
+                    moves=_moves(settings.moves),
+                )
                 state = None  # continue from the backend's last step and random state
         if remaining:
             start = state if state is not None else backend.get_last_sample()
-            with tqdm(total=settings.n_steps, initial=stored, desc=description, unit="step",
-                      disable=not progress, leave=False) as bar:
+            with tqdm(
+                total=settings.n_steps, initial=stored, desc=description, unit="step", disable=not progress, leave=False
+            ) as bar:
                 for i, _ in enumerate(sampler.sample(start, iterations=remaining), start=stored + 1):
                     bar.update(1)
                     if i % settings.checkpoint_every == 0 or i == settings.n_steps:
@@ -560,8 +613,18 @@ def run_sampler(posterior, settings: SamplerSettings, chain_path: str | Path, *,
     elapsed = time.perf_counter() - started
 
     chain, log_prob, acceptance = read_chain(chain_path)
-    return ChainRun(space.names, chain, log_prob, acceptance, autocorr_time(chain), stored,
-                    remaining, elapsed, init_info, str(chain_path))
+    return ChainRun(
+        space.names,
+        chain,
+        log_prob,
+        acceptance,
+        autocorr_time(chain),
+        stored,
+        remaining,
+        elapsed,
+        init_info,
+        str(chain_path),
+    )
 
 
 def autocorr_time(chain):
@@ -571,8 +634,6 @@ def autocorr_time(chain):
     never accepted a step has no autocorrelation (emcee would divide by its zero variance and
     return NaN for the whole parameter). NaN where no walker moved or the chain has one step.
     """
-    from emcee.autocorr import integrated_time
-
     steps, _, ndim = chain.shape
     tau = np.full(ndim, np.nan)
     if steps < 2:
@@ -580,5 +641,5 @@ def autocorr_time(chain):
     for d in range(ndim):
         moved = np.ptp(chain[:, :, d], axis=0) > 0.0
         if moved.any():
-            tau[d] = integrated_time(chain[:, moved, d:d + 1], tol=0)[0]
+            tau[d] = integrated_time(chain[:, moved, d : d + 1], tol=0)[0]
     return tau

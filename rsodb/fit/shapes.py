@@ -1,16 +1,16 @@
 """Shapes a fit can use, and how their brightness function is built once per fit.
 
-``SHAPES`` maps a name to a `Shape`: how to build the `raycast.scene.Scene` (or, for the
+``SHAPES`` maps a name to a `Shape`: how to build the `raycast.renderer.scene.Scene` (or, for the
 analytic ``box``, a `ConvexFacets`), which articulation parameters it has and their default
 values. `brightness_for` turns a shape and the fit's free parameters into the object the
 forward model calls at every step, ``intensity(sun_body, obs_body, **parameters)``:
 
 ``renderer="cached"`` (default)
-    `raycast.cache.SceneCache`, built once. A free articulation parameter (e.g. TOPEX's
+    `raycast.renderer.cache.SceneCache`, built once. A free articulation parameter (e.g. TOPEX's
     ``panel_pitch_deg``) gets an articulation grid over its prior's range; a fixed one is
     baked into the scene.
 ``renderer="direct"``
-    `raycast.direct.DirectRenderer`: the slow reference, for checks.
+    `raycast.renderer.direct.DirectRenderer`: the slow reference, for checks.
 
 Material scalars (``albedo_scale``, ``roughness``) are not parameters of the cache: the cache
 holds geometry and visibility, and evaluates each material's BRDF at run time. `MaterialScalars`
@@ -21,20 +21,34 @@ normals, solar-disk samples) is chosen from the smoothest roughness the prior al
 Caches are kept per process (`functools.lru_cache`), so fitting many passes of one object in
 one worker builds the shape's cache once.
 """
+
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 import functools
 import math
 from types import MappingProxyType
-from typing import Any, Callable, Mapping
+from typing import Any
 
 import numpy as np
 
+from raycast.models import cosmos2502, topex
+from raycast.renderer.brdf import GGX, Lambertian, Principled
+from raycast.renderer.cache import SceneCache
+from raycast.renderer.direct import DirectRenderer
+from raycast.renderer.rays import sun_samples_for
 from rsodb.fit.model import ConvexFacets
 
-__all__ = ["Shape", "SHAPES", "AUTO_SHAPES", "MATERIAL_PARAMETERS", "MaterialScalars", "brightness_for",
-           "shape_for_norad"]
+__all__ = [
+    "Shape",
+    "SHAPES",
+    "AUTO_SHAPES",
+    "MATERIAL_PARAMETERS",
+    "MaterialScalars",
+    "brightness_for",
+    "shape_for_norad",
+]
 
 MATERIAL_PARAMETERS = ("albedo_scale", "roughness")
 # Articulation grid points per degree of a free articulation's prior range (at least 3).
@@ -63,14 +77,10 @@ class Shape:
 
 
 def _topex():
-    from raycast.models import topex
-
     return topex.build()
 
 
 def _cosmos2502():
-    from raycast.models import cosmos2502
-
     return cosmos2502.build()
 
 
@@ -89,19 +99,33 @@ def _lopsided():
     return ConvexFacets(body.normals, body.areas_m2, albedo)
 
 
-SHAPES: Mapping[str, Shape] = MappingProxyType({
-    "topex": Shape(_topex, {"panel_pitch_deg": 12.0}, False,
-                   "TOPEX/Poseidon: bus, solar array (pitch 12 deg per the published fit), antennas"),
-    "cosmos2502": Shape(_cosmos2502, {}, False, "COSMOS 2502 (Lotos-S1): the published workflow's model"),
-    "box": Shape(_box, {}, True, "a 1 x 1 x 2 m Lambertian box along body z, albedo 0.2 (analytic)"),
-    "ellipsoid": Shape(_ellipsoid, {}, True,
-                       "a Lambertian triaxial ellipsoid, semi-axes 1 x 0.5 x 0.35 m along body x, y, z, albedo 0.2, "
-                       "320 facets (analytic; the generic shape for objects without a model: spinning about z "
-                       "it tumbles end over end)"),
-    "lopsided": Shape(_lopsided, {}, True,
-                      "the ellipsoid with albedo 0.4 / 0.3 / 0.2 / 0.1 on its +x+y / +x-y / -x+y / -x-y quarters: "
-                      "no rotational symmetry, so every phase is observable (for calibration studies)"),
-})
+SHAPES: Mapping[str, Shape] = MappingProxyType(
+    {
+        "topex": Shape(
+            _topex,
+            {"panel_pitch_deg": 12.0},
+            False,
+            "TOPEX/Poseidon: bus, solar array (pitch 12 deg per the published fit), antennas",
+        ),
+        "cosmos2502": Shape(_cosmos2502, {}, False, "COSMOS 2502 (Lotos-S1): the published workflow's model"),
+        "box": Shape(_box, {}, True, "a 1 x 1 x 2 m Lambertian box along body z, albedo 0.2 (analytic)"),
+        "ellipsoid": Shape(
+            _ellipsoid,
+            {},
+            True,
+            "a Lambertian triaxial ellipsoid, semi-axes 1 x 0.5 x 0.35 m along body x, y, z, albedo 0.2, "
+            "320 facets (analytic; the generic shape for objects without a model: spinning about z "
+            "it tumbles end over end)",
+        ),
+        "lopsided": Shape(
+            _lopsided,
+            {},
+            True,
+            "the ellipsoid with albedo 0.4 / 0.3 / 0.2 / 0.1 on its +x+y / +x-y / -x+y / -x-y quarters: "
+            "no rotational symmetry, so every phase is observable (for calibration studies)",
+        ),
+    }
+)
 
 # Objects whose model the project has, by NORAD number.
 AUTO_SHAPES: Mapping[int, str] = MappingProxyType({22076: "topex", 40358: "cosmos2502"})
@@ -114,21 +138,24 @@ def shape_for_norad(norad: int, fallback: str | None = "ellipsoid") -> str:
     if fallback is None:
         raise ValueError(
             f"no model of NORAD {norad} is known (known: {', '.join(f'{k} {v}' for k, v in AUTO_SHAPES.items())}); "
-            f"name a shape in the fit configuration ([model] shape = one of {', '.join(SHAPES)})")
+            f"name a shape in the fit configuration ([model] shape = one of {', '.join(SHAPES)})"
+        )
     return fallback
 
 
 def _rescaled_brdf(brdf, albedo_scale: float, roughness: float | None):
-    from raycast.brdf import GGX, Lambertian, Principled
-
     if isinstance(brdf, Lambertian):
         return replace(brdf, albedo=brdf.albedo * albedo_scale)
     if isinstance(brdf, GGX):
-        return replace(brdf, color=brdf.color * albedo_scale,
-                       roughness=brdf.roughness if roughness is None else roughness)
+        return replace(
+            brdf, color=brdf.color * albedo_scale, roughness=brdf.roughness if roughness is None else roughness
+        )
     if isinstance(brdf, Principled):
-        return replace(brdf, base_color=brdf.base_color * albedo_scale,
-                       roughness=brdf.roughness if roughness is None else roughness)
+        return replace(
+            brdf,
+            base_color=brdf.base_color * albedo_scale,
+            roughness=brdf.roughness if roughness is None else roughness,
+        )
     raise TypeError(f"cannot rescale a {type(brdf).__name__} BRDF; fix albedo_scale and roughness for this shape")
 
 
@@ -159,40 +186,54 @@ class MaterialScalars:
         roughness = values.get("roughness", 0.5)
         return 0 <= scale * brightest <= 1 and 0.01 <= roughness <= 1
 
-    def intensity(self, sun_body, obs_body, albedo_scale: float = 1.0, roughness: float | None = None,
-                  **articulation):
+    def intensity(self, sun_body, obs_body, albedo_scale: float = 1.0, roughness: float | None = None, **articulation):
         scene = self.renderer.scene
-        brdfs = {name: _rescaled_brdf(brdf, albedo_scale, roughness)
-                 for name, brdf in zip(scene.material_names, scene.brdfs) if brdf is not None}
+        brdfs = {
+            name: _rescaled_brdf(brdf, albedo_scale, roughness)
+            for name, brdf in zip(scene.material_names, scene.brdfs)
+            if brdf is not None
+        }
         renderer = replace(self.renderer, scene=scene.with_brdfs(**brdfs))
         return renderer.intensity(sun_body, obs_body, **articulation)
 
 
 @functools.lru_cache(maxsize=4)
-def _cached_scene_cache(shape: str, fixed: tuple, grid: tuple, smoothest_roughness: float | None,
-                        accuracy_mag: float, progress: bool):
-    from raycast.cache import SceneCache
-
+def _cached_scene_cache(
+    shape: str, fixed: tuple, grid: tuple, smoothest_roughness: float | None, accuracy_mag: float, progress: bool
+):
     scene = SHAPES[shape].build()
     if fixed:
         scene = scene.with_parameters(**dict(fixed))
     options = {}
     if smoothest_roughness is not None:
-        from raycast.direct import sun_samples_for
-
-        smooth = scene.with_brdfs(**{n: _rescaled_brdf(b, 1.0, smoothest_roughness)
-                                     for n, b in zip(scene.material_names, scene.brdfs) if b is not None})
-        alpha = smoothest_roughness ** 2
-        options = {"normal_step_deg": float(np.clip(math.degrees(alpha) / 2.0, 0.5, 3.0)),
-                   "sun_samples": sun_samples_for(smooth, accuracy_mag)}
+        smooth = scene.with_brdfs(
+            **{
+                n: _rescaled_brdf(b, 1.0, smoothest_roughness)
+                for n, b in zip(scene.material_names, scene.brdfs)
+                if b is not None
+            }
+        )
+        alpha = smoothest_roughness**2
+        options = {
+            "normal_step_deg": float(np.clip(math.degrees(alpha) / 2.0, 0.5, 3.0)),
+            "sun_samples": sun_samples_for(smooth, accuracy_mag),
+        }
     articulation_grid = {name: list(values) for name, values in grid} or None
-    return SceneCache.build(scene, accuracy_mag=accuracy_mag, articulation_grid=articulation_grid,
-                            progress=progress, **options)
+    return SceneCache.build(
+        scene, accuracy_mag=accuracy_mag, articulation_grid=articulation_grid, progress=progress, **options
+    )
 
 
-def brightness_for(shape: str, free_bounds: Mapping[str, tuple[float, float]], fixed: Mapping[str, float], *,
-                   renderer: str = "cached", accuracy_mag: float = 0.01, pixel_size_m: float = 0.05,
-                   progress: bool = False):
+def brightness_for(
+    shape: str,
+    free_bounds: Mapping[str, tuple[float, float]],
+    fixed: Mapping[str, float],
+    *,
+    renderer: str = "cached",
+    accuracy_mag: float = 0.01,
+    pixel_size_m: float = 0.05,
+    progress: bool = False,
+):
     """The brightness function of a shape for a fit.
 
     Parameters
@@ -229,25 +270,27 @@ def brightness_for(shape: str, free_bounds: Mapping[str, tuple[float, float]], f
         raise ValueError(f"shape {shape!r} has no parameters {unknown}; it has {', '.join(sorted(allowed))}")
     materials = tuple(n for n in MATERIAL_PARAMETERS if n in names)
     articulation_free = {n: b for n, b in free_bounds.items() if n in spec.articulations}
-    articulation_fixed = {n: float(fixed.get(n, default)) for n, default in spec.articulations.items()
-                          if n not in articulation_free}
+    articulation_fixed = {
+        n: float(fixed.get(n, default)) for n, default in spec.articulations.items() if n not in articulation_free
+    }
     if spec.analytic:
         if materials:
             raise ValueError(f"shape {shape!r} is analytic and has no material parameters; remove {list(materials)}")
         return spec.build(), ()
     if renderer == "cached":
-        grid = tuple((name, tuple(np.linspace(low, high, max(3, int(math.ceil((high - low) * _GRID_PER_DEG)) + 1))))
-                     for name, (low, high) in sorted(articulation_free.items()))
+        grid = tuple(
+            (name, tuple(np.linspace(low, high, max(3, int(math.ceil((high - low) * _GRID_PER_DEG)) + 1))))
+            for name, (low, high) in sorted(articulation_free.items())
+        )
         smoothest = None
         if "roughness" in free_bounds:
             smoothest = float(free_bounds["roughness"][0])
         elif "roughness" in fixed:
             smoothest = float(fixed["roughness"])
-        base = _cached_scene_cache(shape, tuple(sorted(articulation_fixed.items())), grid, smoothest,
-                                   float(accuracy_mag), bool(progress))
+        base = _cached_scene_cache(
+            shape, tuple(sorted(articulation_fixed.items())), grid, smoothest, float(accuracy_mag), bool(progress)
+        )
     elif renderer == "direct":
-        from raycast.direct import DirectRenderer
-
         scene = spec.build().with_parameters(**articulation_fixed) if articulation_fixed else spec.build()
         base = DirectRenderer(scene, pixel_size_m, 1)
     else:

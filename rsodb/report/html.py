@@ -8,6 +8,7 @@ the style sheet is inline), so a report can be mailed or archived as it is.
 >>> '<h2 id="summary">Summary</h2>' in doc.to_html()
 True
 """
+
 from __future__ import annotations
 
 import base64
@@ -17,6 +18,10 @@ import io
 import os
 from pathlib import Path
 import tempfile
+
+import numpy as np
+
+from rsodb.plotting import pyplot
 
 __all__ = ["Document", "Heading", "Paragraph", "Figure", "Table", "Raw", "figure_from_matplotlib", "anchor"]
 
@@ -106,14 +111,14 @@ class Table:
         object.__setattr__(self, "numeric", frozenset(self.numeric))
 
     @classmethod
-    def from_pandas(cls, frame, caption: str = "", float_format: str = "{:.4g}") -> "Table":
+    def from_pandas(cls, frame, caption: str = "", float_format: str = "{:.4g}") -> Table:
         """A table from a DataFrame (index dropped; numeric columns formatted and right-aligned)."""
-        import numpy as np
-
         numeric = frozenset(i for i, dtype in enumerate(frame.dtypes) if np.issubdtype(dtype, np.number))
         rows = tuple(
-            tuple(float_format.format(v) if i in numeric and isinstance(v, float) else str(v)
-                  for i, v in enumerate(record))
+            tuple(
+                float_format.format(v) if i in numeric and isinstance(v, float) else str(v)
+                for i, v in enumerate(record)
+            )
             for record in frame.itertuples(index=False)
         )
         return cls(tuple(frame.columns), rows, caption, numeric)
@@ -121,9 +126,12 @@ class Table:
     def to_html(self) -> str:
         head = "".join(f"<th>{html.escape(c)}</th>" for c in self.columns)
         body = "\n".join(
-            "<tr>" + "".join(
+            "<tr>"
+            + "".join(
                 f'<td class="num">{html.escape(cell)}</td>' if i in self.numeric else f"<td>{html.escape(cell)}</td>"
-                for i, cell in enumerate(row)) + "</tr>"
+                for i, cell in enumerate(row)
+            )
+            + "</tr>"
             for row in self.rows
         )
         caption = f"<caption>{html.escape(self.caption)}</caption>" if self.caption else ""
@@ -147,29 +155,33 @@ class Document:
     title: str
     blocks: tuple = ()
 
-    def add(self, *blocks) -> "Document":
+    def add(self, *blocks) -> Document:
         """A new document with `blocks` appended."""
         for block in blocks:
             if not callable(getattr(block, "to_html", None)):
-                raise TypeError(f"{type(block).__name__} is not a report block; use Heading, Paragraph, Figure, "
-                                "Table or Raw")
+                raise TypeError(
+                    f"{type(block).__name__} is not a report block; use Heading, Paragraph, Figure, Table or Raw"
+                )
         return Document(self.title, self.blocks + tuple(blocks))
 
-    def extend(self, other: "Document") -> "Document":
+    def extend(self, other: Document) -> Document:
         """A new document with the blocks of `other` appended (its title dropped)."""
         return Document(self.title, self.blocks + other.blocks)
 
     def table_of_contents(self) -> str:
         """A list of links to the level-2 headings."""
-        items = "".join(f'<li><a href="#{html.escape(anchor(b.text))}">{html.escape(b.text)}</a></li>'
-                        for b in self.blocks if isinstance(b, Heading) and b.level == 2)
+        items = "".join(
+            f'<li><a href="#{html.escape(anchor(b.text))}">{html.escape(b.text)}</a></li>'
+            for b in self.blocks
+            if isinstance(b, Heading) and b.level == 2
+        )
         return f"<ul>{items}</ul>" if items else ""
 
     def to_html(self) -> str:
         """The whole page as one string."""
         body = "\n".join(block.to_html() for block in self.blocks)
         return (
-            "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
+            '<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
             f"<title>{html.escape(self.title)}</title>\n<style>{_STYLE}</style>\n</head>\n<body>\n"
             f"<h1>{html.escape(self.title)}</h1>\n{body}\n</body>\n</html>\n"
         )
@@ -184,7 +196,7 @@ class Document:
                 stream.write(self.to_html())
             umask = os.umask(0)
             os.umask(umask)
-            os.chmod(tmp, 0o666 & ~umask)      # mkstemp creates 0600; a report is for sharing
+            os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600; a report is for sharing
             os.replace(tmp, path)
         except BaseException:
             Path(tmp).unlink(missing_ok=True)
@@ -194,11 +206,9 @@ class Document:
 
 def figure_from_matplotlib(fig, caption: str = "", dpi: int = 110) -> Figure:
     """Render a matplotlib figure to an embedded PNG `Figure` and close it."""
-    import matplotlib.pyplot as plt
-
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png", dpi=dpi, bbox_inches="tight")
-    plt.close(fig)
+    pyplot().close(fig)
     return Figure(buffer.getvalue(), caption)
 
 

@@ -1,0 +1,156 @@
+"""Period survey of an archive: every pass through `rsodb.periods.analyse_pass`, in parallel.
+
+Workers (a ``spawn`` process pool, `rsodb.pool`) each open the archive read-only, read their
+pass, compute its geometry from the pass's elements and find its period; the main process
+stores the results as they arrive, in batches (``archive.store_results``, one atomic commit
+per object, at most `STORE_EVERY` results or `STORE_EVERY_S` seconds apart, and whatever is
+pending when the survey stops or is interrupted), so an interrupted survey keeps what it
+finished. A pass that fails is reported with its error and does not stop the others.
+
+>>> from rsodb.archive import Archive                                   # doctest: +SKIP
+>>> survey = survey_periods(Archive("archive"), norad=22076)            # doctest: +SKIP
+>>> [r.summary() for r in survey.results]                               # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import json
+import time
+
+from rsodb.archive import Archive
+from rsodb.periods.analysis import analyse_pass
+from rsodb.periods.search import DEFAULT_RESULT_NAME, PeriodResult, PeriodSettings
+from rsodb.pool import imap_in_pool
+
+__all__ = ["survey_periods", "PeriodSurvey", "load_period_results"]
+
+# Results held before a batched store (each store rewrites the object's file once).
+STORE_EVERY = 200
+STORE_EVERY_S = 30.0
+
+
+@dataclass(frozen=True)
+class PeriodSurvey:
+    """What a survey found.
+
+    Attributes
+    ----------
+    results : tuple of PeriodResult
+        One per pass that was analysed, sorted by pass start.
+    failures : tuple of (str, str)
+        ``(pass_id, error)`` for the passes that could not be analysed.
+    stored_as : str or None
+        The result name used in the archive, None when nothing was stored.
+    """
+
+    results: tuple[PeriodResult, ...]
+    failures: tuple[tuple[str, str], ...]
+    stored_as: str | None
+
+    @property
+    def ok(self) -> bool:
+        return not self.failures
+
+    def to_dict(self) -> dict:
+        return {
+            "results": [result.to_dict() for result in self.results],
+            "failures": [{"pass_id": pass_id, "error": error} for pass_id, error in self.failures],
+            "stored_as": self.stored_as,
+        }
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), indent=1, ensure_ascii=False)
+
+
+_OPEN_ARCHIVES: dict = {}
+
+
+def _analyse_stored(task: tuple) -> tuple[str, PeriodResult | None, str]:
+    """Worker: (archive path, pass id, settings dict, geometry flag) -> (pass id, result, error)."""
+    path, pass_id, settings, geometry = task
+    try:
+        archive = _OPEN_ARCHIVES.get(path)
+        if archive is None:
+            archive = _OPEN_ARCHIVES[path] = Archive(path, create=False)
+        result = analyse_pass(archive.get(pass_id), PeriodSettings.from_dict(settings), geometry=geometry)
+        return pass_id, result, ""
+    except Exception as error:  # noqa: BLE001 - one bad pass is reported, the survey goes on
+        return pass_id, None, f"{type(error).__name__}: {error}"
+
+
+def survey_periods(
+    archive,
+    norad: int | None = None,
+    *,
+    band: str | None = None,
+    settings: PeriodSettings | None = None,
+    name: str = DEFAULT_RESULT_NAME,
+    processes: int | None = None,
+    progress: bool = True,
+    store: bool = True,
+    geometry: bool = True,
+) -> PeriodSurvey:
+    """Find the period of every current pass of an archive (or of one object).
+
+    Parameters
+    ----------
+    archive : rsodb.archive.Archive
+    norad : int, optional
+        Only this object.
+    band : str, optional
+        Only this band.
+    settings : PeriodSettings, optional
+    name : str
+        Name under which results are stored (``"default"``); storing again replaces them.
+    processes : int, optional
+        Worker processes (default: the usable cores; 1 = in this process).
+    progress : bool
+        Show a progress bar.
+    store : bool
+        Store each result in the archive as it arrives.
+    geometry : bool
+        Compute each pass's geometry for the synodic-to-sidereal correction.
+
+    Returns
+    -------
+    PeriodSurvey
+    """
+    settings = settings or PeriodSettings()
+    rows = archive.catalog(norad, band)
+    tasks = [(str(archive.path), row.pass_id, settings.to_dict(), geometry) for row in rows]
+    results, failures, unstored = [], [], []
+    last_store_s = time.monotonic()
+    try:
+        for pass_id, result, error in imap_in_pool(
+            _analyse_stored, tasks, processes=processes, progress=progress, description="periods", chunksize=1
+        ):
+            if result is None:
+                failures.append((pass_id, error))
+                continue
+            results.append(result)
+            if store:
+                unstored.append((pass_id, "periods", name, result))
+            # Each commit rewrites the object's file: store in batches, but never hold more than
+            # STORE_EVERY results or STORE_EVERY_S seconds of work that a crash would lose.
+            if len(unstored) >= STORE_EVERY or (unstored and time.monotonic() - last_store_s > STORE_EVERY_S):
+                archive.store_results(unstored)
+                unstored, last_store_s = [], time.monotonic()
+    finally:
+        if unstored:
+            archive.store_results(unstored)
+    order = {row.pass_id: i for i, row in enumerate(rows)}
+    results.sort(key=lambda r: order[r.pass_id])
+    failures.sort(key=lambda f: order[f[0]])
+    return PeriodSurvey(tuple(results), tuple(failures), name if store else None)
+
+
+def load_period_results(
+    archive, norad: int | None = None, name: str = DEFAULT_RESULT_NAME, band: str | None = None
+) -> list[PeriodResult]:
+    """The stored period results of an archive's passes (passes without one are skipped), by start time."""
+    results = []
+    for row in archive.catalog(norad, band):
+        if name in archive.result_names(row.pass_id, "periods"):
+            results.append(archive.load_result(row.pass_id, "periods", name, PeriodResult.from_hdf5))
+    return results
