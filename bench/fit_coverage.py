@@ -1,6 +1,6 @@
 """Injection-recovery coverage of the spin-state fit: do the 68% intervals hold the truth 68% of the time?
 
-    python bench/fit_coverage.py                     # 20 truths, TOPEX model; appends to docs/benchmarks.md
+    python bench/fit_coverage.py                     # 20 truths, TOPEX model; recorded by bench/record.py
     python bench/fit_coverage.py --shape lopsided --truths 40
     python bench/fit_coverage.py --truths 4 --steps 200 --no-record
 
@@ -20,7 +20,6 @@ Trials run in a process pool (one per core); each is seeded, so a run is reprodu
 from __future__ import annotations
 
 import argparse
-import datetime as dt
 import os
 from pathlib import Path
 import sys
@@ -31,7 +30,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-BENCHMARKS = ROOT / "docs" / "benchmarks.md"
+from bench.record import command, figure, record, today  # noqa: E402
+
 TOPEX_PHV = ROOT.parent / "shared" / "data" / "observations" / "result_22076_20240730_UT212240.phV"
 FIGURE = ROOT / "docs" / "img" / "fit_coverage.png"
 BAND = (0.50, 0.85)
@@ -112,7 +112,7 @@ def main(argv=None) -> int:
     parser.add_argument("--search-maxiter", type=int, default=100, help="search generations (default 100)")
     parser.add_argument("--processes", type=int, default=None)
     parser.add_argument("--save", metavar="FILE.json", help="also write every truth's recovery here")
-    parser.add_argument("--no-record", action="store_true")
+    parser.add_argument("--no-record", action="store_true", help="print only; record nothing, draw no figure")
     args = parser.parse_args(argv)
 
     from ingest import read_file
@@ -168,7 +168,7 @@ def main(argv=None) -> int:
     )
     load = os.getloadavg()
     section = f"""
-## Fit coverage by injection-recovery ({dt.date.today().isoformat()}, bench/fit_coverage.py)
+## Fit coverage by injection-recovery ({today()}, bench/fit_coverage.py)
 
 {args.truths} truths drawn from the fit's prior (spin period uniform 9.76-9.96 s, phases uniform,
 precession period 200-3000 s, cone angle 0-90 deg, jitter 0-0.03 mag), rendered with the
@@ -195,9 +195,18 @@ Per truth: kept chain length in autocorrelation times, and each parameter's trut
 |---|---|{"---|" * len(table)}
 {truth_rows}
 """
-    with open(BENCHMARKS, "a") as handle:
-        handle.write(section)
-    print(f"appended to {BENCHMARKS}")
+    inside = sum(BAND[0] <= fraction <= BAND[1] for fraction in table.values())
+    figures = [
+        figure(
+            "pooled coverage of the 16-84% intervals",
+            f"{pooled:.2f} over {args.truths * len(table)} intervals",
+            f"{BAND[0]:.2f}-{BAND[1]:.2f}",
+        ),
+        figure("parameters inside 50-85%", f"{inside} of {len(table)}", f"{len(table)} of {len(table)}"),
+        figure("chains converged", f"{converged} of {args.truths}"),
+        figure(f"wall time, {args.truths} truths", f"{elapsed / 60:.0f} min on {os.cpu_count()} cores"),
+    ]
+    record("fit_coverage", command("fit_coverage.py", argv), figures, section)
     return 0
 
 

@@ -11,32 +11,35 @@ Measures, after the TLE is loaded and the ephemeris is warm (median of repeats):
 * the largest difference from skyfield evaluated at every epoch (the cost of interpolating the
   slow frame terms), and the peak memory of one 10^4-epoch call.
 
-Run ``python bench/geometry.py`` (``--repeats N``, ``--no-record`` to skip appending the dated
-section to docs/benchmarks.md).
+Run ``python bench/geometry.py`` (``--repeats N``, ``--no-record`` to print only, without recording
+the run through bench/record.py in docs/benchmarks/history.jsonl and docs/benchmarks.md).
 """
 
 from __future__ import annotations
 
 import argparse
-import datetime as dt
 import os
 from pathlib import Path
 import platform
 import statistics
+import sys
 import time
 import tracemalloc
 
 import numpy as np
 
-from ingest.site import DERENIVKA
-from raycast.geometry import ephemeris
-from raycast.geometry.attitude import InertialSpin, PrecessingSpin, TorqueFree
-from raycast.geometry.orbit import Satellite
-from raycast.geometry.pass_geometry import PassGeometry
-
+# The project's root first: run as a script, bench/ leads sys.path, where "ingest" would name
+# bench/ingest.py rather than the project's package.
 ROOT = Path(__file__).resolve().parents[1]
-BENCHMARKS = ROOT / "docs" / "benchmarks.md"
-HEADER = "# Benchmarks\n\nDated sections appended by the scripts in bench/; newest last.\n"
+sys.path.insert(0, str(ROOT))
+
+from bench.record import command, figure, record, today  # noqa: E402
+from ingest.site import DERENIVKA  # noqa: E402
+from raycast.geometry import ephemeris  # noqa: E402
+from raycast.geometry.attitude import InertialSpin, PrecessingSpin, TorqueFree  # noqa: E402
+from raycast.geometry.orbit import Satellite  # noqa: E402
+from raycast.geometry.pass_geometry import PassGeometry  # noqa: E402
+
 TOPEX_TLE = (
     "0 TOPEX/POSEIDON",
     "1 22076U 92052A   24212.51246405 -.00000054  00000-0  29042-4 0  9994",
@@ -168,7 +171,7 @@ def report(results: dict) -> str:
     load = " / ".join(f"{x:.1f}" for x in os.getloadavg())
     error = results["error"]
     lines = [
-        f"## Pass geometry ({dt.date.today().isoformat()}, bench/geometry.py)",
+        f"## Pass geometry ({today()}, bench/geometry.py)",
         "",
         f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python "
         f"{platform.python_version()}; load average {load} at the end of the run. The machine (a VM) is "
@@ -209,21 +212,34 @@ def report(results: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def headline_figures(results: dict) -> list[dict]:
+    wall, cpu, _ = results["geometry_ms"]
+    return [
+        figure(
+            f"PassGeometry.compute, {N_EPOCHS} epochs",
+            f"{wall:.1f} ms wall ({cpu:.1f} ms CPU)",
+            f"<= {TARGET_MS:.0f} ms wall",
+        ),
+        figure("skyfield, vectorised, same epochs", f"{results['skyfield_vectorised_ms'][1] / cpu:.0f}x the CPU time"),
+        figure(
+            "body_frame, PrecessingSpin, 150 times x 4", f"{results['body_frame_us']['PrecessingSpin'][0]:.0f} µs wall"
+        ),
+        figure("largest difference from skyfield", f"{results['error']['position_mm']:.2g} mm in position"),
+    ]
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(
         description=__doc__.split("\n\n")[0], epilog="example: python bench/geometry.py --repeats 21"
     )
     parser.add_argument("--repeats", type=int, default=15, help="timed repeats per figure (median taken)")
-    parser.add_argument("--no-record", action="store_true", help="print only; do not append to docs/benchmarks.md")
+    parser.add_argument("--no-record", action="store_true", help="print only; record nothing")
     args = parser.parse_args(argv)
-    text = report(run(args.repeats))
+    results = run(args.repeats)
+    text = report(results)
     print(text)
     if not args.no_record:
-        if not BENCHMARKS.exists():
-            BENCHMARKS.write_text(HEADER)
-        with BENCHMARKS.open("a") as handle:
-            handle.write("\n" + text)
-        print(f"appended to {BENCHMARKS}")
+        record("geometry", command("geometry.py", argv), headline_figures(results), text, data=results)
     return 0
 
 

@@ -1,6 +1,6 @@
 """Ingest speed and memory: 2000 ccd_phot files of 2500 rows over 50 objects into a new archive.
 
-    python bench/ingest.py                 # full size, 3 repeats, appends to docs/benchmarks.md
+    python bench/ingest.py                 # full size, 3 repeats, recorded by bench/record.py
     python bench/ingest.py --files 200 --repeats 1 --no-record     # a quick look
 
 The corpus is synthesised once (`rsodb.samples.synthetic`, written by `ingest.writers` in the
@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import argparse
 from concurrent.futures import ProcessPoolExecutor
-import datetime as dt
 import json
 import os
 from pathlib import Path
@@ -35,12 +34,13 @@ import tempfile
 import time
 
 # Running this file puts bench/ first on sys.path, where "ingest" would name this script rather
-# than the project's package.
+# than the project's package: bench/ leaves sys.path and the project's root leads it.
 sys.path[:] = [entry for entry in sys.path if Path(entry or ".").resolve() != Path(__file__).resolve().parent]
-
 ROOT = Path(__file__).resolve().parents[1]
-BENCHMARKS = ROOT / "docs" / "benchmarks.md"
-HEADER = "# Benchmarks\n\nDated sections appended by the scripts in bench/; newest last.\n"
+sys.path.insert(0, str(ROOT))
+
+from bench.record import command, figure, record, today  # noqa: E402
+
 TARGET_FILES_PER_S = 100.0
 SEED = 2026
 
@@ -143,18 +143,24 @@ def run(n_files: int, n_points: int, n_objects: int, repeats: int) -> dict:
     }
 
 
-def report(run_result: dict) -> str:
-    results = run_result["results"]
+def rates(results: dict) -> tuple[dict, dict]:
+    """Median files/s and CPU ms per file of each operation."""
     rate = {mode: statistics.median(r["files"] / r["elapsed_s"] for r in rows) for mode, rows in results.items()}
     cpu_ms = {mode: 1e3 * statistics.median(r["cpu_s"] / r["files"] for r in rows) for mode, rows in results.items()}
+    return rate, cpu_ms
+
+
+def report(run_result: dict) -> str:
+    results = run_result["results"]
+    rate, cpu_ms = rates(results)
     memory = {mode: max(r["peak_rss_mib"] for r in rows) for mode, rows in results.items()}
     readers = {mode: max(r["peak_rss_readers_mib"] for r in rows) for mode, rows in results.items()}
     load = os.getloadavg()
     verdict = "meets" if rate["ingest"] >= TARGET_FILES_PER_S else "MISSES"
     lines = [
-        f"## Archive ingest ({dt.date.today().isoformat()})",
+        f"## Archive ingest ({today()}, bench/ingest.py)",
         "",
-        f"`python bench/ingest.py`: {run_result['n_files']} synthetic ccd_phot files of {run_result['n_points']} "
+        f"{run_result['n_files']} synthetic ccd_phot files of {run_result['n_points']} "
         f"rows over {run_result['n_objects']} objects ({run_result['corpus_mib']:.0f} MiB of text) into a new "
         f"archive ({run_result['archive_mib']:.0f} MiB of HDF5); median of {run_result['repeats']} run(s), each in a "
         f"fresh process. {os.cpu_count()} CPUs ({platform.processor() or platform.machine()}), "
@@ -182,6 +188,22 @@ def report(run_result: dict) -> str:
     return "\n".join(lines)
 
 
+def headline_figures(run_result: dict) -> list[dict]:
+    rate, cpu_ms = rates(run_result["results"])
+    return [
+        figure(
+            f"ingest, {run_result['n_files']} files of {run_result['n_points']} rows",
+            f"{rate['ingest']:.1f} files/s",
+            f">= {TARGET_FILES_PER_S:.0f} files/s",
+        ),
+        figure("re-ingest (all files present)", f"{rate['re-ingest']:.1f} files/s"),
+        figure(
+            "CPU per file, ingest",
+            f"{cpu_ms['ingest']:.1f} ms (two idle cores: at most {2e3 / cpu_ms['ingest']:.0f} files/s)",
+        ),
+    ]
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if argv and argv[0] == "_measure":
@@ -193,16 +215,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rows", type=int, default=2500)
     parser.add_argument("--objects", type=int, default=50)
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--no-record", action="store_true", help="print only; do not append to docs/benchmarks.md")
+    parser.add_argument("--no-record", action="store_true", help="print only; record nothing")
     args = parser.parse_args(argv)
-    text = report(run(args.files, args.rows, args.objects, args.repeats))
+    run_result = run(args.files, args.rows, args.objects, args.repeats)
+    text = report(run_result)
     print(text)
     if not args.no_record:
-        if not BENCHMARKS.exists():
-            BENCHMARKS.write_text(HEADER)
-        with BENCHMARKS.open("a") as handle:
-            handle.write("\n" + text)
-        print(f"appended to {BENCHMARKS}")
+        record("ingest", command("ingest.py", argv), headline_figures(run_result), text, data=run_result)
     return 0
 
 

@@ -1,7 +1,8 @@
 """Injection-recovery chart of the period search: docs/img/period_recovery.png.
 
-    python bench/period_recovery.py              # ~1000 seeded synthetic passes, 2 processes
+    python bench/period_recovery.py              # ~1400 seeded synthetic passes, 2 processes; recorded
     python bench/period_recovery.py --seeds 1    # a quicker, noisier chart
+    python bench/period_recovery.py --seeds 1 --no-record --out /tmp/recovery.png
 
 Synthetic passes (`rsodb.periods.injection`): 2500 points at a 0.2 s cadence (500 s), every shape
 (sinusoid, two-faced, four-faced, glint), 1.5 to 200 cycles in the pass, amplitude 0.3 or
@@ -15,6 +16,8 @@ the noise, which no photometric method resolves) and other errors;
 (b) period error of the recovered passes (median and 90th percentile of |dP/P|) and the
 median reported 1-sigma error; (c) recovery rate per observing condition; (d) the two-faced
 curve with nearly equal halves: recovery against the asymmetry.
+
+The run's figures are recorded by bench/record.py (docs/benchmarks/history.jsonl, docs/benchmarks.md).
 """
 
 from __future__ import annotations
@@ -26,6 +29,10 @@ import sys
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from bench.record import command, figure, record, today  # noqa: E402
+
 OUTPUT = ROOT / "docs" / "img" / "period_recovery.png"
 CYCLES = np.array([1.5, 2.0, 2.5, 3.0, 4.0, 6.0, 10.0, 16.0, 25.0, 40.0, 65.0, 100.0, 150.0, 200.0])
 DURATION_S = 2500 * 0.2
@@ -81,6 +88,7 @@ def main(argv=None) -> int:
     parser.add_argument("--seeds", type=int, default=2, help="repeats of each grid point")
     parser.add_argument("--processes", type=int, default=None)
     parser.add_argument("--out", type=Path, default=OUTPUT)
+    parser.add_argument("--no-record", action="store_true", help="draw the chart only; record nothing")
     args = parser.parse_args(argv)
 
     import matplotlib
@@ -188,19 +196,43 @@ def main(argv=None) -> int:
 
     long_enough = grid[grid.n_cycles >= 3.5]
     other = long_enough.confident_wrong & ~long_enough.confident_subharmonic
-    print(
-        f"{len(grid)} grid passes; with >= 3.5 cycles: recovered {100 * long_enough.recovered.mean():.1f}%, "
-        f"confidently wrong {100 * long_enough.confident_wrong.mean():.2f}% (at P/2..P/4: "
-        f"{100 * long_enough.confident_subharmonic.mean():.2f}%, otherwise {100 * other.mean():.2f}%)"
+    recovered = 100 * long_enough.recovered.mean()
+    wrong, subharmonic = 100 * long_enough.confident_wrong.mean(), 100 * long_enough.confident_subharmonic.mean()
+    lines = [
+        f"{len(grid)} grid passes; with >= 3.5 cycles: recovered {recovered:.1f}%, "
+        f"confidently wrong {wrong:.2f}% (at P/2..P/4: {subharmonic:.2f}%, otherwise {100 * other.mean():.2f}%)",
+        "recovered by amplitude and noise (mag): "
+        + ", ".join(
+            f"{a:g} / {n:g}: {rate:.3f}"
+            for (a, n), rate in grid.groupby(["amplitude_mag", "noise_mag"]).recovered.mean().items()
+        ),
+        "recovered by shape: "
+        + ", ".join(f"{name} {rate:.3f}" for name, rate in grid.groupby("shape").recovered.mean().items()),
+        "recovered by condition: "
+        + ", ".join(f"{name} {rate:.3f}" for name, rate in grid.groupby("condition").recovered.mean().items()),
+        "verdicts below 3 cycles: "
+        + ", ".join(f"{v} {c}" for v, c in grid[grid.n_cycles < 2.9].verdict.value_counts().items()),
+        "two-faced curve, recovered by asymmetry: "
+        + ", ".join(f"{a:g} {rate:.2f}" for a, rate in rows.recovered.mean().items()),
+    ]
+    print("\n".join(lines))
+    if args.no_record:
+        return 0
+    chart = args.out.resolve()
+    shown = f"![injection-recovery]({chart.relative_to(ROOT / 'docs')})" if chart.is_relative_to(ROOT / "docs") else ""
+    section = (
+        f"## Period search injection-recovery ({today()}, bench/period_recovery.py)\n\n"
+        f"{len(table)} seeded synthetic passes of 2500 points at a 0.2 s cadence ({args.seeds} per grid point; "
+        f"see docs/periods.md), chart {chart.name}. A pass is recovered when the verdict names a period and "
+        "the +-1% fit prior holds the truth.\n\n"
+        + (f"{shown}\n\n" if shown else "")
+        + "\n".join(f"* {line}" for line in lines)
     )
-    print(
-        "recovered by amplitude and noise:",
-        grid.groupby(["amplitude_mag", "noise_mag"]).recovered.mean().round(3).to_dict(),
-    )
-    print(grid.groupby("shape").recovered.mean().round(3).to_string())
-    print("by condition:", grid.groupby("condition").recovered.mean().round(3).to_dict())
-    print("verdicts below 3 cycles:", grid[grid.n_cycles < 2.9].verdict.value_counts().to_dict())
-    print("asymmetry:", rows.recovered.mean().round(2).to_dict())
+    figures = [
+        figure("recovered, passes of >= 3.5 cycles", f"{recovered:.1f}% of {len(long_enough)}"),
+        figure("confidently wrong, >= 3.5 cycles", f"{wrong:.2f}% ({subharmonic:.2f}% at P/2..P/4)"),
+    ]
+    record("period_recovery", command("period_recovery.py", argv), figures, section)
     return 0
 
 

@@ -1,6 +1,6 @@
 """Period search speed: 1000 passes of 2500 points through `find_period` on a process pool.
 
-    python bench/periods.py                       # 1000 passes, appends to docs/benchmarks.md
+    python bench/periods.py                       # 1000 passes, recorded by bench/record.py
     python bench/periods.py --passes 100 --no-record
 
 The passes are synthetic (`rsodb.periods.injection`, seeded): mixed shapes (sinusoid, two-faced,
@@ -22,7 +22,6 @@ CPU time does not depend on other jobs sharing the machine; wall time does.
 from __future__ import annotations
 
 import argparse
-import datetime as dt
 import os
 from pathlib import Path
 import platform
@@ -39,7 +38,10 @@ for _key in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-BENCHMARKS = ROOT / "docs" / "benchmarks.md"
+sys.path.insert(0, str(ROOT))
+
+from bench.record import command, figure, record, today  # noqa: E402
+
 TARGET_S = 60.0
 
 
@@ -96,7 +98,7 @@ def main(argv=None) -> int:
     parser.add_argument("--passes", type=int, default=1000)
     parser.add_argument("--sample", type=int, default=40, help="passes timed one by one in this process")
     parser.add_argument("--processes", type=int, default=None)
-    parser.add_argument("--no-record", action="store_true", help="do not append to docs/benchmarks.md")
+    parser.add_argument("--no-record", action="store_true", help="print only; record nothing")
     parser.add_argument("--note", default="", help="a sentence appended to the recorded section")
     args = parser.parse_args(argv)
 
@@ -153,63 +155,70 @@ def main(argv=None) -> int:
     ]
     print("\n".join(lines))
     if not args.no_record:
+        measured = {
+            "passes": len(items),
+            "processes": processes,
+            "survey_s": survey_s,
+            "worker_cpu_s": worker_cpu_s,
+            "sample": len(sample),
+            "find_period_cpu_ms": median_ms,
+            "peer_cpu_ms": peer_ms,
+            "recovered": recovered,
+            "confident_wrong": confident_wrong,
+            "verdicts": verdict_counts,
+            "load": load,
+        }
         record(
-            items,
-            processes,
-            survey_s,
-            worker_cpu_s,
-            median_ms,
-            peer_ms,
-            recovered,
-            confident_wrong,
-            verdict_counts,
-            load,
-            status,
-            len(sample),
-            args.note,
+            "periods", command("periods.py", argv), headline_figures(measured), report(measured, args.note), measured
         )
     return 0
 
 
-def record(
-    items,
-    processes,
-    survey_s,
-    worker_cpu_s,
-    median_ms,
-    peer_ms,
-    recovered,
-    confident_wrong,
-    verdict_counts,
-    load,
-    status,
-    n_sample,
-    note: str = "",
-) -> None:
-    n = len(items)
-    text = (
-        f"\n## Period search (bench/periods.py, {dt.date.today().isoformat()})\n\n"
-        f"`python bench/periods.py`: {n} synthetic passes of 2500 points (0.2 s cadence, mixed "
+def report(m: dict, note: str = "") -> str:
+    """The run's markdown section from its measurements (``m``, as main records them)."""
+    n, load, processes = m["passes"], m["load"], m["processes"]
+    status = "met" if m["survey_s"] <= TARGET_S else "MISSED"
+    return (
+        f"## Period search (bench/periods.py, {today()})\n\n"
+        f"{n} synthetic passes of 2500 points (0.2 s cadence, mixed "
         f"shapes, periods 2-100 s, 20% with gaps, 20% with red noise) through `rsodb.periods.find_period`. "
         f"{os.cpu_count()} CPUs ({platform.machine()}), Python {platform.python_version()}; load average "
         f"{load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} at the end: the machine is shared, so wall times are "
         f"upper bounds; CPU times suffer less (cache and core contention only). Two free cores would need about "
-        f"{worker_cpu_s / processes:.0f} s for the survey's CPU time.\n\n"
+        f"{m['worker_cpu_s'] / processes:.0f} s for the survey's CPU time.\n\n"
         f"| measurement | value | ratio |\n|---|---:|---:|\n"
-        f"| survey, {processes} processes, pool start included: wall | {survey_s:.1f} s "
+        f"| survey, {processes} processes, pool start included: wall | {m['survey_s']:.1f} s "
         f"| target <= {TARGET_S:.0f} s: {status} |\n"
-        f"| survey: workers' CPU per pass | {1e3 * worker_cpu_s / n:.1f} ms | |\n"
-        f"| one process, CPU, median of {n_sample}: find_period | {median_ms:.1f} ms | {median_ms / peer_ms:.1f}x |\n"
-        f"| one process, CPU, median of {n_sample}: astropy LombScargle alone (peer) | {peer_ms:.1f} ms | 1.0x |\n\n"
-        f"Recovered within the +-1% prior: {100 * recovered:.1f}%; confidently wrong: {100 * confident_wrong:.1f}%; "
-        f"verdicts: "
-        + ", ".join(f"{v} {c}" for v, c in verdict_counts.items())
+        f"| survey: workers' CPU per pass | {1e3 * m['worker_cpu_s'] / n:.1f} ms | |\n"
+        f"| one process, CPU, median of {m['sample']}: find_period | {m['find_period_cpu_ms']:.1f} ms "
+        f"| {m['find_period_cpu_ms'] / m['peer_cpu_ms']:.1f}x |\n"
+        f"| one process, CPU, median of {m['sample']}: astropy LombScargle alone (peer) | {m['peer_cpu_ms']:.1f} ms "
+        f"| 1.0x |\n\n"
+        f"Recovered within the +-1% prior: {100 * m['recovered']:.1f}%; confidently wrong: "
+        f"{100 * m['confident_wrong']:.1f}%; verdicts: "
+        + ", ".join(f"{v} {c}" for v, c in m["verdicts"].items())
         + ".\n"
         + (f"\n{note}\n" if note else "")
     )
-    with open(BENCHMARKS, "a", encoding="utf-8") as stream:
-        stream.write(text)
-    print(f"appended to {BENCHMARKS}")
+
+
+def headline_figures(m: dict) -> list[dict]:
+    return [
+        figure(
+            f"survey, {m['passes']} passes, {m['processes']} processes",
+            f"{m['survey_s']:.1f} s wall",
+            f"<= {TARGET_S:.0f} s",
+        ),
+        figure("workers' CPU per pass", f"{1e3 * m['worker_cpu_s'] / m['passes']:.1f} ms"),
+        figure(
+            "find_period, one process",
+            f"{m['find_period_cpu_ms']:.1f} ms CPU per pass ({m['find_period_cpu_ms'] / m['peer_cpu_ms']:.1f}x astropy LombScargle)",
+        ),
+        figure(
+            "recovered within the +-1% prior",
+            f"{100 * m['recovered']:.1f}% (confidently wrong {100 * m['confident_wrong']:.1f}%)",
+        ),
+    ]
 
 
 if __name__ == "__main__":

@@ -14,8 +14,9 @@ one-off precomputation timed separately) and Blender Cycles at several sample co
 ``raycast.cycles``, on a subset of the frames, its time per light curve extrapolated from its
 time per frame).
 
-Output: a speed-vs-accuracy chart (docs/img/render_speed_accuracy.png) and a dated table
-appended to docs/benchmarks.md. The machine is shared: wall times are under load from other
+Output: a speed-vs-accuracy chart (docs/img/render_speed_accuracy.png) and a table recorded by
+bench/record.py (docs/benchmarks/history.jsonl, docs/benchmarks.md), with the result rows as data
+for the chart. The machine is shared: wall times are under load from other
 jobs; CPU times of this process are printed beside them.
 
 Run: ``python bench/render.py`` (add ``--no-cycles`` to skip Blender, ``--quick`` for a smoke run,
@@ -25,7 +26,6 @@ Run: ``python bench/render.py`` (add ``--no-cycles`` to skip Blender, ``--quick`
 from __future__ import annotations
 
 import argparse
-import datetime
 import os
 from pathlib import Path
 import resource
@@ -37,6 +37,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from bench.record import command, figure, latest, record, today  # noqa: E402
 from raycast.geometry.attitude import PrecessingSpin  # noqa: E402
 from raycast.models import topex  # noqa: E402
 from raycast.renderer.brdf import GGX, Lambertian, Principled  # noqa: E402
@@ -48,7 +49,6 @@ SHARED = (ROOT / ".." / "shared" / "data").resolve()
 TOPEX_PHV = SHARED / "observations" / "result_22076_20240730_UT212240.phV"
 MODELS = SHARED / "models"
 CHART = ROOT / "docs" / "img" / "render_speed_accuracy.png"
-TABLE = ROOT / "docs" / "benchmarks.md"
 
 ATTITUDES = {
     "TOPEX": PrecessingSpin(period_s=9.86, precession_period_s=689.0, precession_angle_deg=35.0, spin_axis="z"),
@@ -320,41 +320,70 @@ def time_at_error(rows, error_mag, key="cpu_s"):
     return float(np.exp(np.interp(np.log(error_mag), np.log(errors), np.log(envelope)))), "interpolated"
 
 
-def verdict(rows, method, target_mag, target_s):
-    """One sentence: does ``method`` meet its target, and how much faster than Cycles at equal accuracy."""
+def headline(rows, method, target_mag):
+    """(best, met, cycles_s, how): ``method``'s cheapest setting (CPU) within ``target_mag`` (met) or its
+    most accurate one (not met), and, when met and Cycles ran, Cycles' CPU time at the same error and
+    how it was found (see :func:`time_at_error`)."""
     # "direct" covers all of its samplings ("direct" adaptive, "direct-grid", "direct-raster").
     mine = [r for r in rows if r["method"].split("-")[0] == method]
     cycles = [r for r in rows if r["method"] == "cycles"]
     met = [r for r in mine if r["error_mag"] <= target_mag]
     if not met:
-        best = min(mine, key=lambda r: r["error_mag"])
+        return min(mine, key=lambda r: r["error_mag"]), False, None, None
+    best = min(met, key=lambda r: r["cpu_s"])
+    cycles_s, how = time_at_error(cycles, best["error_mag"]) if cycles else (None, None)
+    return best, True, cycles_s, how
+
+
+def verdict(rows, method, target_mag, target_s):
+    """One sentence: does ``method`` meet its target, and how much faster than Cycles at equal accuracy."""
+    best, met, cycles_s, how = headline(rows, method, target_mag)
+    if not met:
         return (
             f"{method} MISSES {target_mag} mag at every setting (best {best['error_mag']:.4f} mag at "
             f"{best['cpu_s']:.3f} s CPU)"
         )
-    best = min(met, key=lambda r: r["cpu_s"])
     text = (
         f"{best['method']} {best['setting']}: {best['error_mag']:.4f} mag in {1e3 * best['cpu_s']:.1f} ms CPU "
         f"({1e3 * best['wall_s']:.1f} ms wall; {'meets' if best['cpu_s'] <= target_s else 'MISSES'} "
         f"{target_s:g} s at {target_mag} mag)"
     )
-    if cycles:
-        cycles_s, how = time_at_error(cycles, best["error_mag"])
+    if cycles_s is not None:
         ratio = cycles_s / best["cpu_s"]
         if how is None:
-            text += (
-                f", Cycles never reached {best['error_mag']:.4f} mag (best "
-                f"{min(r['error_mag'] for r in cycles):.4f}): > {ratio:.0f}x"
-            )
+            cycles_best = min(r["error_mag"] for r in rows if r["method"] == "cycles")
+            text += f", Cycles never reached {best['error_mag']:.4f} mag (best {cycles_best:.4f}): > {ratio:.0f}x"
         else:
             text += f", Cycles at equal accuracy ({how}) {cycles_s:.1f} s CPU: {ratio:.0f}x"
             text += " (meets 100x)" if ratio >= 100 else " (MISSES 100x)"
     return text
 
 
+def headline_figures(results):
+    """The recorded figures: per model, the fast path and the direct renderer at their targets."""
+    figures = []
+    for model in dict.fromkeys(r["model"] for r in results):
+        rows = [r for r in results if r["model"] == model and r["frames"] == 150]
+        for method, target_mag, target_s in TARGETS:
+            best, met, cycles_s, how = headline(rows, method, target_mag)
+            time_text = f"{1e3 * best['cpu_s']:.1f} ms CPU"
+            if met:
+                value = f"{time_text} at {best['error_mag']:.4f} mag ({best['method']} {best['setting']})"
+                if cycles_s is not None:
+                    ratio = cycles_s / best["cpu_s"]
+                    value += f", {ratio:.0f}x Cycles" if how else f", > {ratio:.0f}x Cycles (never as accurate)"
+            else:
+                value = f"MISSES {target_mag} mag: best {best['error_mag']:.4f} mag in {time_text}"
+            limit = f"{1e3 * target_s:g} ms" if target_s < 1 else f"{target_s:g} s"
+            name = "fast path" if method == "cached" else "direct renderer"
+            figures.append(figure(f"{model} {name}", value, f"<= {limit} CPU at <= {target_mag} mag; >= 100x Cycles"))
+    return figures
+
+
 def table(results, load, peak_mb, convergence):
+    """The run's markdown section."""
     lines = [
-        f"\n## Renderer speed vs accuracy ({datetime.date.today().isoformat()}, bench/render.py)\n",
+        f"## Renderer speed vs accuracy ({today()}, bench/render.py)\n",
         f"Real TOPEX pass 2024-07-30 (Derenivka), paper attitudes; one direction pair per frame. "
         f"Shared 2-core machine, load average {load:.1f} at the start: wall times are inflated by other "
         f"jobs, CPU times are this process's. Errors are RMS magnitudes against a converged reference (the "
@@ -384,38 +413,17 @@ def table(results, load, peak_mb, convergence):
             f"- {model}: "
             + "; ".join(verdict(rows, method, target_mag, target_s) for method, target_mag, target_s in TARGETS)
         )
-    lines += ["", *verdicts, ""]
-    with TABLE.open("a") as handle:
-        handle.write("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    lines += ["", *verdicts]
+    return "\n".join(lines) + "\n"
 
 
-def results_from_table(path=TABLE):
-    """The rows of the last recorded run in docs/benchmarks.md, as :func:`bench_model` gives them."""
-    text = path.read_text()
-    start = text.rfind("## Renderer speed vs accuracy")
-    if start < 0:
-        raise SystemExit(f"{path} holds no renderer run; run bench/render.py first")
-    results = []
-    for line in text[start:].splitlines():
-        cells = [c.strip() for c in line.strip().strip("|").split("|")]
-        if len(cells) != 9 or not cells[1].isdigit():
-            continue
-        number = lambda cell: float(cell.split()[0]) if cell != "-" else float("nan")  # noqa: E731 ("0.5 s", "45 MB")
-        results.append(
-            dict(
-                model=cells[0],
-                frames=int(cells[1]),
-                method=cells[2],
-                setting=cells[3],
-                wall_s=number(cells[4]),
-                cpu_s=number(cells[5]),
-                setup_s=number(cells[6]),
-                error_mag=float(cells[7]),
-                memory_mb=0.0 if cells[8] == "-" else number(cells[8]),
-            )
-        )
-    return results
+def recorded_results():
+    """The rows of the last recorded run (its history data), as :func:`bench_model` gives them."""
+    run = latest("render")
+    if run is None or not run.get("data"):
+        raise SystemExit("the benchmark history holds no renderer run; run bench/render.py first")
+    # The history keeps missing numbers (no CPU time) as null.
+    return [{k: float("nan") if v is None else v for k, v in row.items()} for row in run["data"]]
 
 
 def main(argv=None):
@@ -425,11 +433,11 @@ def main(argv=None):
     parser.add_argument(
         "--chart-only",
         action="store_true",
-        help="redraw the chart from the last run recorded in docs/benchmarks.md; renders nothing",
+        help="redraw the chart from the last recorded run (docs/benchmarks/history.jsonl); renders nothing",
     )
     args = parser.parse_args(argv)
     if args.chart_only:
-        chart(results_from_table(), CHART)
+        chart(recorded_results(), CHART)
         return 0
     load = os.getloadavg()[0]
     short = np.arange(150)  # 30 s at 5 fps
@@ -503,7 +511,9 @@ def main(argv=None):
             print(r)
         return 0
     chart(results, CHART)
-    table(results, load, peak_mb, convergence)
+    section = table(results, load, peak_mb, convergence)
+    print(section)
+    record("render", command("render.py", argv), headline_figures(results), section, data=results)
     return 0
 
 
