@@ -57,3 +57,13 @@ def pytest_runtest_makereport(item, call):
     if report.failed and _reads_missing_shared_data(call.excinfo):
         report.outcome = "skipped"
         report.longrepr = (str(item.path), item.location[1] or 0, f"Skipped: {MISSING_SHARED}")
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_make_collect_report(collector):
+    # A test module that reads ../shared/data when it is imported is skipped as a whole.
+    outcome = yield
+    report = outcome.get_result()
+    if report.failed and not SHARED_DATA.is_dir() and str(SHARED_DATA) in str(report.longrepr):
+        report.outcome = "skipped"
+        report.longrepr = (str(collector.path), 0, f"Skipped: {MISSING_SHARED}")
