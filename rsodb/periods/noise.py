@@ -5,8 +5,6 @@
   median).
 * `residual_amplitude_mag`: the mean amplitude spectrum of residuals around a frequency, the
   noise of the S/N >= 4 rule (Breger et al. 1993).
-* `without_slow`: a series minus its running mean over a time window, so that variation slower
-  than a period (transparency, seeing, a drifting shape) does not count as failing to repeat.
 
 See docs/periods.md for how the verdicts use them.
 """
@@ -17,7 +15,7 @@ import math
 
 import numpy as np
 
-__all__ = ["point_to_point_noise_mag", "residual_amplitude_mag", "white_amplitude_mag", "without_slow"]
+__all__ = ["point_to_point_noise_mag", "residual_amplitude_mag", "white_amplitude_mag"]
 
 # 1 / Phi^-1(3/4): the standard deviation of a normal variable from its median absolute deviation.
 _MAD_TO_SIGMA = 1.482602218505602
@@ -87,26 +85,3 @@ def residual_amplitude_mag(t_s: np.ndarray, residual: np.ndarray, low_hz: float,
         total += abs(current.sum())
         current = current * step
     return float(total / n_trial * 2.0 / t_s.size)
-
-
-def without_slow(t_s: np.ndarray, y: np.ndarray, window_s: float) -> np.ndarray:
-    """`y` minus its running mean over `window_s` centred on each sample (shorter at the ends).
-
-    The running mean over a whole number of cycles of a periodic signal is constant, so a period
-    shorter than half the window passes unchanged while slower variation is removed.
-
-    Parameters
-    ----------
-    t_s, y : (n,) float
-        Increasing times (s) and values.
-    window_s : float
-
-    Returns
-    -------
-    (n,) float
-    """
-    t_s, y = np.asarray(t_s, dtype=float), np.asarray(y, dtype=float)
-    cumulative = np.concatenate([[0.0], np.cumsum(y)])
-    lo = np.searchsorted(t_s, t_s - 0.5 * window_s, side="left")
-    hi = np.searchsorted(t_s, t_s + 0.5 * window_s, side="right")
-    return y - (cumulative[hi] - cumulative[lo]) / (hi - lo)

@@ -94,8 +94,8 @@ RHO_MAX = 0.98
 RHO_STEP = 0.05
 # Gaps of at least this fraction of the pass are checked for cycle-count aliases.
 GAP_MIN_FRACTION = 0.05
-# Variation slower than this many periods is left out when judging how much a period explains.
-SLOW_WINDOW_CYCLES = 2.0
+# A harmonic rival is judged in each half of the pass when it has this many cycles there.
+HALF_CYCLES = 1.5
 
 
 @dataclass(frozen=True)
@@ -815,11 +815,11 @@ def _whiten(problem: _Problem) -> None:
     Correlated residuals (red noise, or a light-curve shape that drifts during the pass) make
     every extra harmonic look significant to a white-noise criterion, and multiples of the period
     - or one slow cycle spanning the pass - fit them best. The lag-1 correlation of the leading
-    repeating candidate's raw residuals sets the AR(1) filter; every candidate is then scored on
+    candidate's raw residuals sets the AR(1) filter; every candidate is then scored on
     the filtered magnitudes (`SeriesData.prewhitened`).
     """
     for _ in range(2):
-        leader = problem.leader()
+        leader = problem.leader(repeating=False)
         if leader is None:
             return
         rho = min(max(_raw_fit(problem, leader).residual_lag1, 0.0), RHO_MAX)
@@ -1033,15 +1033,19 @@ def find_period(
 
 
 def _best_model(problem: _Problem, noise_mag: float) -> tuple[_Scored, HarmonicFit]:
-    """The leading repeating candidate whose periodic part is no wider than the data, and its raw model.
+    """The reported candidate and its raw model.
 
-    A candidate whose trend and harmonics cancel each other (possible only when they nearly
-    share a span) gets a periodic part swinging far beyond the magnitudes; it is marked
-    degenerate and the next one leads.
+    The best candidate that repeats at least twice in the pass, unless a slower one beats it by
+    the BIC margin (then the pass is too short for any period, and the slow one is the best
+    description). A candidate whose trend and harmonics cancel each other (possible only when
+    they nearly share a span) gets a periodic part swinging far beyond the magnitudes; it is
+    marked degenerate and the next one leads.
     """
     span = float(np.ptp(problem.raw.y)) + 4.0 * (noise_mag if math.isfinite(noise_mag) else 0.0)
     while True:
-        best = problem.leader()
+        best, overall = problem.leader(), problem.leader(repeating=False)
+        if overall.bic < best.bic - problem.settings.bic_margin:
+            best = overall
         model = _raw_fit(problem, best)
         if model.peak_to_peak_mag <= span or all(s.degenerate or s is best for s in problem.scored):
             return best, model
@@ -1060,7 +1064,6 @@ def _evidence(problem, lc, best, model, candidates, fap, snr, residual, noise_ma
     explained, structured = _explained(problem, best)
     # Scored candidates in the order of `candidates` (the reported one first).
     by_scored = {candidates[i]: scored for i, scored in enumerate(_ranked(problem, best))}
-    slow = [c for c in candidates[1:] if c.n_cycles < REPEAT_CYCLES and c.delta_bic <= -s.bic_margin]
     evidence = Evidence(
         duration_s=problem.duration_s,
         cadence_s=problem.cadence_s,
@@ -1072,7 +1075,6 @@ def _evidence(problem, lc, best, model, candidates, fap, snr, residual, noise_ma
         explained_fraction=explained,
         best=candidates[0],
         candidates=candidates,
-        slow=min(slow, key=lambda c: c.bic) if slow else None,
         flashes=find_flashes(lc.t_s, lc.mag, noise_mag, problem.cadence_s),
         cadence_alias=_cadence_alias(problem, candidates[0], candidates),
         gap_alias=_gap_alias(problem, best),
@@ -1262,13 +1264,13 @@ def _halves(problem: _Problem, best: _Scored, by_candidate: dict) -> tuple[Candi
     difference below half the margin, or None when both halves prefer the best by that much.
     """
     data, settings = problem.data, problem.settings
-    # Only rivals that repeat at least twice in a half can be judged there.
+    # Only rivals that repeat at least one and a half times in a half can be judged there.
     rivals = [
         (candidate, scored)
         for candidate, scored in by_candidate.items()
         if scored is not best
         and not scored.degenerate
-        and problem.cycles(scored) >= 2 * REPEAT_CYCLES
+        and problem.cycles(scored) >= HALF_CYCLES * 2
         and scored.bic - best.bic < settings.refine_margin
         and _harmonic_ratio(scored.fit.period_s, best.fit.period_s)
     ]

@@ -4,21 +4,25 @@
 BIC, the explained fraction, flashes, aliases, split-half preferences...) and `judge` turns it
 into one of `VERDICTS`, checked in this order:
 
-1. ``"no signal"``: nothing beyond the errors and the pass trend, or a Lomb-Scargle peak that
-   noise could give (false-alarm probability above the threshold), or a strongest harmonic
-   below S/N 4 against a residual that is white noise;
-2. ``"single glint"``: one flash carries most of the variation;
-3. ``"too short"``: the best period fits fewer than `min_cycles` times in the pass, two flashes
-   carry the variation, or a variation slower than any repeating period fits much better;
-4. ``"non-periodic"``: the best period explains less than half of the variation beyond the
-   noise, or its strongest harmonic is below S/N 4 against a structured residual;
-5. ``"aliased"``: the sampling can make the period up (cadence commensurate with a shorter
+1. ``"no signal"``: the brightness is constant within its errors, apart from the pass trend;
+2. ``"single glint"``: one flash carries most of the variation; ``"too short"``: two do (one or
+   two flashes put no peak in a periodogram, so this comes before the next check);
+3. ``"no signal"``: the Lomb-Scargle peak could be noise (false-alarm probability above the
+   threshold);
+4. ``"too short"``: the best period fits fewer than `min_cycles` times in the pass (also when a
+   variation slower than any repeating period fits best);
+5. ``"no signal"`` or ``"non-periodic"``: the strongest harmonic is below S/N 4 against the
+   residual around it (white residual: no signal; structured residual: non-periodic);
+6. ``"non-periodic"``: the best period explains less than half of the variation beyond the
+   noise, and the rest is not noise;
+7. ``"aliased"``: the sampling can make the period up (cadence commensurate with a shorter
    candidate, fewer than 3 samples per cycle, or a count of cycles across a gap that another
    count fits as well);
-6. ``"ambiguous harmonic"``: a harmonically related candidate fits nearly as well (also when
-   the residuals' correlation is counted at every frequency), phase dispersion does not confirm
-   the period, or a half of the pass does not reject a harmonic rival by half the margin;
-7. ``"confident"``.
+8. ``"ambiguous harmonic"``: a harmonically related candidate fits nearly as well, phase
+   dispersion does not confirm the period, a half of the pass does not reject a harmonic rival
+   by half the margin, or a rival fits nearly as well when the residuals' correlation is
+   counted at every frequency;
+9. ``"confident"``.
 
 Only "confident" and "ambiguous harmonic" name a period (`PERIOD_VERDICTS`). The thresholds and
 their calibration are in docs/periods.md.
@@ -70,8 +74,6 @@ class Evidence:
         The reported candidate (the best that repeats at least twice in the pass).
     candidates : tuple of Candidate
         All, best first.
-    slow : Candidate or None
-        The best candidate repeating fewer than twice, when it beats `best` by the BIC margin.
     flashes : rsodb.periods.glints.Flashes
     cadence_alias : Candidate or None
         A shorter candidate whose sampling makes `best` an artefact.
@@ -97,7 +99,6 @@ class Evidence:
     explained_fraction: float
     best: object
     candidates: tuple
-    slow: object | None
     flashes: object
     cadence_alias: object | None
     gap_alias: tuple | None
@@ -131,11 +132,6 @@ def judge(e: Evidence, settings) -> tuple[str, str]:
             f"the best model improves chi-square over the pass trend alone by {gain:.1f}, less than the "
             f"{limit:.1f} noise gives at p = {s.fap_threshold:g}: the brightness is constant within its errors"
         )
-    if not e.false_alarm_probability <= s.fap_threshold:
-        return "no signal", (
-            f"the highest Lomb-Scargle peak ({e.peak_period_s:.4g} s) has false-alarm probability "
-            f"{e.false_alarm_probability:.2g}, above {s.fap_threshold:g}"
-        )
     if e.flashes.dominant and e.flashes.count == 1:
         return "single glint", (
             f"one flash carries the variation ({e.flashes.describe()}): a period needs it to repeat"
@@ -146,16 +142,15 @@ def judge(e: Evidence, settings) -> tuple[str, str]:
             f"two flashes {gap:.4g} s apart carry the variation ({e.flashes.describe()}): one interval, "
             f"fewer than {s.min_cycles:g} cycles"
         )
+    if not e.false_alarm_probability <= s.fap_threshold:
+        return "no signal", (
+            f"the highest Lomb-Scargle peak ({e.peak_period_s:.4g} s) has false-alarm probability "
+            f"{e.false_alarm_probability:.2g}, above {s.fap_threshold:g}"
+        )
     if best.n_cycles < s.min_cycles:
         return "too short", (
             f"the best period fits fewer than {s.min_cycles:g} times in the {e.duration_s:.0f} s pass; "
             f"candidates: {_listing(e.candidates)}"
-        )
-    if e.slow is not None:
-        return "too short", (
-            f"a variation slower than any repeating period fits best ({_period(e.slow)}, "
-            f"{e.slow.n_cycles:.1f} cycles, BIC lower by {best.bic - e.slow.bic:.0f} than {_period(best)}): "
-            "the pass is too short to tell a long period from a non-repeating change"
         )
     if not e.signal_to_noise >= s.snr_threshold:
         if e.structured:
