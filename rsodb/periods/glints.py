@@ -38,6 +38,8 @@ class Flashes:
         How much brighter than the baseline that sample is (positive).
     width_s : (m,) float
         From the first to the last sample of the flash (plus one cadence).
+    start_s, stop_s : (m,) float
+        Times of the first and last sample of each flash.
     share : float
         Fraction of the light curve's variation about its baseline, beyond the noise, carried
         by the flash samples (0..1).
@@ -47,6 +49,8 @@ class Flashes:
     height_mag: np.ndarray
     width_s: np.ndarray
     share: float
+    start_s: np.ndarray
+    stop_s: np.ndarray
 
     @property
     def count(self) -> int:
@@ -56,6 +60,12 @@ class Flashes:
     def dominant(self) -> bool:
         """True when the flashes carry most of the variation (`FLASH_SHARE`)."""
         return self.count > 0 and self.share >= FLASH_SHARE
+
+    def outside(self, t_s) -> np.ndarray:
+        """(n,) True for the times `t_s` outside every flash."""
+        t_s = np.asarray(t_s, dtype=float)
+        inside = (t_s[:, None] >= self.start_s[None, :]) & (t_s[:, None] <= self.stop_s[None, :])
+        return ~inside.any(axis=1)
 
     def describe(self) -> str:
         """A few words: how many flashes, where, how bright."""
@@ -103,7 +113,7 @@ def find_flashes(t_s, mag, noise_mag: float, cadence_s: float) -> Flashes:
         `FLASH_MAX_WIDTH` of the pass.
     """
     t_s, mag = np.asarray(t_s, dtype=float), np.asarray(mag, dtype=float)
-    empty = Flashes(np.zeros(0), np.zeros(0), np.zeros(0), 0.0)
+    empty = Flashes(np.zeros(0), np.zeros(0), np.zeros(0), 0.0, np.zeros(0), np.zeros(0))
     if not (noise_mag > 0) or t_s.size < 10:
         return empty
     residual = mag - _baseline(t_s, mag, noise_mag, min(3, t_s.size // 10 - 1))
@@ -131,4 +141,4 @@ def find_flashes(t_s, mag, noise_mag: float, cadence_s: float) -> Flashes:
     excess = residual**2 - noise_mag**2
     total = float(np.sum(np.maximum(excess, 0.0)))
     share = float(np.sum(np.maximum(excess[inside], 0.0)) / total) if total > 0 else 0.0
-    return Flashes(peaks, heights, width, min(share, 1.0))
+    return Flashes(peaks, heights, width, min(share, 1.0), t_s[starts], t_s[stops])

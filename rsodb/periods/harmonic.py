@@ -404,11 +404,25 @@ def _nested_from_normal(gram: np.ndarray, rhs: np.ndarray, n_trend: int, n_harmo
 
 def _whitened(gram: np.ndarray, rhs: np.ndarray):
     """Cholesky factor of the Jacobi-scaled normal matrix and ``z = L^-1 rhs`` (scaled alike)."""
-    scale = np.sqrt(np.maximum(np.diagonal(gram, axis1=-2, axis2=-1), 1e-300))
+    diagonal = np.diagonal(gram, axis1=-2, axis2=-1)
+    # A column that vanishes at every sample (a sine at exactly the Nyquist frequency) has only
+    # rounding in its row: scale it as if it were 1e-12 of the largest, not by its own zero.
+    scale = np.sqrt(np.maximum(diagonal, 1e-12 * diagonal.max(axis=-1, keepdims=True) + 1e-300))
     gram = gram / scale[..., :, None] / scale[..., None, :]
-    # A tiny ridge keeps the factorisation defined for nearly collinear columns.
-    gram = gram + 1e-10 * np.eye(gram.shape[-1])
-    chol = np.linalg.cholesky(gram)
+    # Built from trigonometric sums, such a column's diagonal can come out a rounding below zero.
+    scaled = np.einsum("...ii->...i", gram)
+    scaled[...] = np.maximum(scaled, 0.0)
+    # A tiny ridge keeps the factorisation defined for nearly collinear columns; exactly
+    # collinear ones (a harmonic on the sampling's alias of another, or of the trend, in sparse
+    # sampling) need a larger one, which leaves their pivots tiny and their models unchosen.
+    for ridge in (1e-10, 1e-7, 1e-4):
+        try:
+            chol = np.linalg.cholesky(gram + ridge * np.eye(gram.shape[-1]))
+            break
+        except np.linalg.LinAlgError:
+            continue
+    else:
+        raise np.linalg.LinAlgError("the normal matrix of the harmonic fit is singular even with a 1e-4 ridge")
     z = np.linalg.solve(chol, (rhs / scale)[..., None])[..., 0]
     return chol, z
 

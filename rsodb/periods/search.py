@@ -1062,6 +1062,7 @@ def _evidence(problem, lc, best, model, candidates, fap, snr, residual, noise_ma
     gain = float(np.sum(weight * about_trend**2) - np.sum(weight * residual**2))
     limit = float(chi2.isf(s.fap_threshold, 2 * model.n_harmonics + 1))
     explained, structured = _explained(problem, best)
+    flashes = find_flashes(lc.t_s, lc.mag, noise_mag, problem.cadence_s)
     # Scored candidates in the order of `candidates` (the reported one first).
     by_scored = {candidates[i]: scored for i, scored in enumerate(_ranked(problem, best))}
     evidence = Evidence(
@@ -1075,7 +1076,8 @@ def _evidence(problem, lc, best, model, candidates, fap, snr, residual, noise_ma
         explained_fraction=explained,
         best=candidates[0],
         candidates=candidates,
-        flashes=find_flashes(lc.t_s, lc.mag, noise_mag, problem.cadence_s),
+        flashes=flashes,
+        flashes_alone=_flashes_alone(lc, flashes, problem.settings),
         cadence_alias=_cadence_alias(problem, candidates[0], candidates),
         gap_alias=_gap_alias(problem, best),
         pdm_weakest=_pdm_weakest(problem, candidates),
@@ -1083,6 +1085,21 @@ def _evidence(problem, lc, best, model, candidates, fap, snr, residual, noise_ma
         conservative=_conservative_rival(problem, best, model, by_scored),
     )
     return evidence, explained
+
+
+def _flashes_alone(lc: LightCurve, flashes, settings: PeriodSettings) -> bool:
+    """True unless one or two dominant flashes leave a significant periodic signal behind them.
+
+    Weak flashes repeating through the pass can show one of them above the noise; the rest of
+    the curve then still has a Lomb-Scargle peak below the false-alarm threshold.
+    """
+    if not (flashes.dominant and flashes.count <= 2):
+        return True
+    rest = lc.select(flashes.outside(lc.t_s))
+    if len(rest) < MIN_POINTS:
+        return True
+    spectrum = power_spectrum(rest.detrend(min(settings.trend_degree, 3)), error_floor_mag=settings.error_floor_mag)
+    return not spectrum.false_alarm_probability() <= settings.fap_threshold
 
 
 def _explained(problem: _Problem, best: _Scored) -> tuple[float, bool]:

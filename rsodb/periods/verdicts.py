@@ -21,7 +21,8 @@ into one of `VERDICTS`, checked in this order:
 8. ``"ambiguous harmonic"``: a harmonically related candidate fits nearly as well, phase
    dispersion does not confirm the period, a half of the pass does not reject a harmonic rival
    by half the margin, or a rival fits nearly as well when the residuals' correlation is
-   counted at every frequency;
+   counted at every frequency, or the pass holds fewer than `MIN_CONFIDENT_CYCLES` cycles (twice
+   the period could not be tested);
 9. ``"confident"``.
 
 Only "confident" and "ambiguous harmonic" name a period (`PERIOD_VERDICTS`). The thresholds and
@@ -41,6 +42,7 @@ __all__ = [
     "EXPLAINED_MIN",
     "MIN_SAMPLES_PER_CYCLE",
     "PDM_P_VALUE",
+    "MIN_CONFIDENT_CYCLES",
 ]
 
 VERDICTS = ("confident", "ambiguous harmonic", "aliased", "non-periodic", "single glint", "too short", "no signal")
@@ -51,6 +53,9 @@ EXPLAINED_MIN = 0.5
 MIN_SAMPLES_PER_CYCLE = 3.0
 # Significance at which phase dispersion must confirm a period over a shorter one dividing it.
 PDM_P_VALUE = 1e-3
+# A confident period P must exclude 2P, which the search tests only when the pass holds two of
+# its cycles: at least 4 cycles of P.
+MIN_CONFIDENT_CYCLES = 4.0
 
 
 @dataclass(frozen=True)
@@ -75,6 +80,9 @@ class Evidence:
     candidates : tuple of Candidate
         All, best first.
     flashes : rsodb.periods.glints.Flashes
+    flashes_alone : bool
+        Without the flash samples, the light curve has no significant Lomb-Scargle peak (the
+        flashes are all there is).
     cadence_alias : Candidate or None
         A shorter candidate whose sampling makes `best` an artefact.
     gap_alias : tuple of (float, float, float) or None
@@ -105,6 +113,7 @@ class Evidence:
     pdm_weakest: tuple | None
     halves: tuple | None
     conservative: tuple | None = None
+    flashes_alone: bool = True
 
 
 def _period(candidate) -> str:
@@ -132,11 +141,11 @@ def judge(e: Evidence, settings) -> tuple[str, str]:
             f"the best model improves chi-square over the pass trend alone by {gain:.1f}, less than the "
             f"{limit:.1f} noise gives at p = {s.fap_threshold:g}: the brightness is constant within its errors"
         )
-    if e.flashes.dominant and e.flashes.count == 1:
+    if e.flashes.dominant and e.flashes.count == 1 and e.flashes_alone:
         return "single glint", (
             f"one flash carries the variation ({e.flashes.describe()}): a period needs it to repeat"
         )
-    if e.flashes.dominant and e.flashes.count == 2:
+    if e.flashes.dominant and e.flashes.count == 2 and e.flashes_alone:
         gap = abs(float(e.flashes.peak_t_s[1] - e.flashes.peak_t_s[0]))
         return "too short", (
             f"two flashes {gap:.4g} s apart carry the variation ({e.flashes.describe()}): one interval, "
@@ -189,7 +198,8 @@ def judge(e: Evidence, settings) -> tuple[str, str]:
             f"{period:.5g} s, one cycle more or less across the {gap:.0f} s gap, fits nearly as well as "
             f"{best.period_s:.5g} s (BIC difference {delta:.1f} < {s.bic_margin:g})"
         )
-    rivals = [c for c in e.candidates[1:] if c.delta_bic < s.bic_margin and c.n_cycles >= 2.0]
+    # Any candidate counts, also one repeating less than twice (reported only when it wins clearly).
+    rivals = [c for c in e.candidates[1:] if c.delta_bic < s.bic_margin]
     if rivals:
         return "ambiguous harmonic", (
             f"{_period(rivals[0])} fits nearly as well as {_period(best)} "
@@ -221,6 +231,11 @@ def judge(e: Evidence, settings) -> tuple[str, str]:
         return "ambiguous harmonic", (
             f"counting the residuals' correlation at every frequency, {_period(rival)} fits nearly as well as "
             f"{_period(best)} (BIC difference {delta:.1f} < {s.bic_margin:g})"
+        )
+    if best.n_cycles < MIN_CONFIDENT_CYCLES:
+        return "ambiguous harmonic", (
+            f"{_period(best)} fits {best.n_cycles:.1f} times in the pass, fewer than {MIN_CONFIDENT_CYCLES:g}: "
+            "twice the period does not repeat twice, so a cycle whose halves differ cannot be excluded"
         )
     runner = e.candidates[1] if len(e.candidates) > 1 else None
     beaten = (
