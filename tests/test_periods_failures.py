@@ -21,7 +21,7 @@ from raycast.geometry.pass_geometry import PassGeometry
 from raycast.models import cosmos2502
 from raycast.renderer.methods import render
 from raycast.renderer.photometry import REFERENCE_RANGE_KM, magnitude
-from rsodb.periods.injection import Injection, synthetic_lightcurve
+from rsodb.periods.injection import Injection, shape_mag, synthetic_lightcurve
 from rsodb.periods.lightcurve import LightCurve
 from rsodb.periods.search import find_period
 from rsodb.periods.verdicts import VERDICTS
@@ -203,6 +203,19 @@ def test_aliased_with_a_gap():
     assert abs(636.0 / result.best_period_s - cycles) < 1.5
 
 
+def test_aliased_when_the_cycles_are_counted_across_gaps():
+    # Two 100 s stretches 600 s apart of a 196.6 s sinusoid at S/N 30: the 800 s pass holds 4.1
+    # cycles, but the samples cover one; periods a fraction of a cycle apart across the gap fit
+    # alike (the verdict calibration found such passes called confident).
+    rng = np.random.default_rng(0)
+    t = np.concatenate([np.arange(500) * 0.2, 700.0 + np.arange(500) * 0.2])
+    period = 195.0 * rng.uniform(0.97, 1.03)
+    mag = 6 + 1.5 * shape_mag("sinusoid", t / period + rng.random()) + rng.normal(0, 0.05, t.size)
+    result = find_period(LightCurve.from_arrays(t, mag, np.full(t.size, 0.05)))
+    assert result.verdict == "aliased" and not result.has_period
+    assert "cover only 1.0 cycles" in result.reason
+
+
 def test_single_glint():
     # A flat curve and one 0.5 s flash of 2 mag in a 300 s pass.
     t = np.arange(1500) * 0.2
@@ -216,6 +229,33 @@ def test_single_glint():
     mag2 = mag - 2.0 * np.exp(-0.5 * ((t - 171.0) / 0.25) ** 2)
     two = find_period(LightCurve.from_arrays(t, mag2, np.full(t.size, 0.02)))
     assert two.verdict == "too short" and "two flashes 40" in two.reason
+
+
+def test_a_flash_over_a_periodic_curve_is_not_a_single_glint():
+    # The same flash over a 7 s sinusoid of 0.1 mag (S/N 5 per sample): the flash carries most of
+    # the variation, but the curve without it still has a significant period. (The verdict is
+    # "non-periodic": the period leaves the flash unexplained.)
+    t = np.arange(1500) * 0.2
+    rng = np.random.default_rng(6)
+    flash = -2.0 * np.exp(-0.5 * ((t - 131.0) / 0.25) ** 2)
+    mag = 6 + 0.05 * np.sin(2 * np.pi * t / 7.0) + flash + rng.normal(0, 0.02, t.size)
+    result = find_period(LightCurve.from_arrays(t, mag, np.full(t.size, 0.02)))
+    assert result.n_flashes == 1
+    assert result.verdict != "single glint"
+    assert result.best_period_s == pytest.approx(7.0, rel=0.01)
+
+
+def test_fewer_than_four_cycles_is_never_confident():
+    # A clean sinusoid 3.5 times in the pass: twice its period does not repeat twice, so
+    # a cycle whose halves differ cannot be excluded however clean the data.
+    t = np.arange(1500) * 0.2
+    rng = np.random.default_rng(7)
+    period = t[-1] / 3.5
+    mag = 6 + 0.4 * np.sin(2 * np.pi * t / period) + rng.normal(0, 0.02, t.size)
+    result = find_period(LightCurve.from_arrays(t, mag, np.full(t.size, 0.02)))
+    assert result.verdict == "ambiguous harmonic" and result.has_period
+    assert result.best_period_s == pytest.approx(period, rel=0.01)
+    assert "fewer than 4" in result.reason
 
 
 @pytest.fixture(scope="module")

@@ -1080,6 +1080,7 @@ def _evidence(problem, lc, best, model, candidates, fap, snr, residual, noise_ma
         flashes_alone=_flashes_alone(lc, flashes, problem.settings),
         cadence_alias=_cadence_alias(problem, candidates[0], candidates),
         gap_alias=_gap_alias(problem, best),
+        covered_s=_covered_s(problem),
         pdm_weakest=_pdm_weakest(problem, candidates),
         halves=_halves(problem, best, by_scored),
         conservative=_conservative_rival(problem, best, model, by_scored),
@@ -1256,6 +1257,13 @@ def _gap_alias(problem: _Problem, best: _Scored) -> tuple[float, float, float] |
             if delta < problem.settings.bic_margin and (closest is None or delta < closest[1]):
                 closest = (1.0 / f, delta, float(step[i]))
     return closest
+
+
+def _covered_s(problem: _Problem) -> float:
+    """Time the samples cover: the pass without its gaps (steps as long as `_gap_alias` checks)."""
+    step = np.diff(problem.raw.t_s)
+    gap = step >= max(GAP_MIN_FRACTION * problem.duration_s, 10 * problem.cadence_s)
+    return float(np.sum(step[~gap]) + (np.count_nonzero(gap) + 1) * problem.cadence_s)
 
 
 def _harmonic_ratio(period_a: float, period_b: float) -> int:

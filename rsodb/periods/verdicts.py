@@ -16,8 +16,9 @@ into one of `VERDICTS`, checked in this order:
 6. ``"non-periodic"``: the best period explains less than half of the variation beyond the
    noise, and the rest is not noise;
 7. ``"aliased"``: the sampling can make the period up (cadence commensurate with a shorter
-   candidate, fewer than 3 samples per cycle, or a count of cycles across a gap that another
-   count fits as well);
+   candidate, fewer than 3 samples per cycle, a count of cycles across a gap that another
+   count fits as well, or fewer than `MIN_CONFIDENT_CYCLES` cycles in the sampled stretches
+   when the pass holds more across its gaps);
 8. ``"ambiguous harmonic"``: a harmonically related candidate fits nearly as well, phase
    dispersion does not confirm the period, a half of the pass does not reject a harmonic rival
    by half the margin, or a rival fits nearly as well when the residuals' correlation is
@@ -80,6 +81,8 @@ class Evidence:
     candidates : tuple of Candidate
         All, best first.
     flashes : rsodb.periods.glints.Flashes
+    covered_s : float
+        Time the samples cover: the pass without its gaps (NaN: not measured).
     flashes_alone : bool
         Without the flash samples, the light curve has no significant Lomb-Scargle peak (the
         flashes are all there is).
@@ -114,6 +117,7 @@ class Evidence:
     halves: tuple | None
     conservative: tuple | None = None
     flashes_alone: bool = True
+    covered_s: float = math.nan
 
 
 def _period(candidate) -> str:
@@ -197,6 +201,13 @@ def judge(e: Evidence, settings) -> tuple[str, str]:
         return "aliased", (
             f"{period:.5g} s, one cycle more or less across the {gap:.0f} s gap, fits nearly as well as "
             f"{best.period_s:.5g} s (BIC difference {delta:.1f} < {s.bic_margin:g})"
+        )
+    covered = e.covered_s / best.period_s
+    if covered < MIN_CONFIDENT_CYCLES <= best.n_cycles:
+        return "aliased", (
+            f"the samples cover only {covered:.1f} cycles of {best.period_s:.5g} s; the other "
+            f"{best.n_cycles - covered:.1f} of the {best.n_cycles:.1f} in the pass are counted across gaps, "
+            "where a different count may fit as well"
         )
     # Any candidate counts, also one repeating less than twice (reported only when it wins clearly).
     rivals = [c for c in e.candidates[1:] if c.delta_bic < s.bic_margin]
