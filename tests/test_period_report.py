@@ -187,6 +187,31 @@ def test_a_trend_is_claimed_only_at_two_sigma_otherwise_its_bound_is_given():
     assert strong.sense == "spinning up" and strong.significance > 2
 
 
+@pytest.mark.parametrize("n_epochs", [2, 5])
+def test_false_trend_claims_stay_at_the_two_sigma_rate_and_real_trends_are_found(n_epochs):
+    # Periods with no trend, scattered by exactly their stated errors: "spinning up/down" must be
+    # claimed no more often than a 2-sigma two-sided test allows, 4.55% (two epochs: the error is
+    # exact; more: the Birge ratio only ever widens it). 500 trials: binomial sigma 0.93%, so
+    # the bound below is 3 sigma above 4.55%.
+    rng = np.random.default_rng(n_epochs)
+    days = np.sort(rng.uniform(0, 300, n_epochs))
+    days[0], days[-1] = 0.0, 300.0
+    times = np.datetime64("2025-01-30T18:00", "ns") + (days * 86400e9).astype("timedelta64[ns]")
+    sigma = rng.uniform(0.001, 0.01, n_epochs)
+    trials = 500
+    claims = sum(
+        fit_period_trend(times, 9.5 + rng.normal(0, sigma), sigma).sense != "no significant trend"
+        for _ in range(trials)
+    )
+    assert claims / trials <= 0.0455 + 3 * 0.0093
+    # A spin-up of 4 standard errors is claimed, in the right sense, in nearly every trial
+    # (expected 97.7% with known errors; fewer when a Birge ratio above 1 widens the error).
+    error = fit_period_trend(times, np.full(n_epochs, 9.5), sigma).slope_err_s_per_yr
+    years = (days - days.mean()) / 365.25
+    found = [fit_period_trend(times, 9.5 - 4 * error * years + rng.normal(0, sigma), sigma).sense for _ in range(100)]
+    assert found.count("spinning up") >= 85
+
+
 def test_trend_from_results_counts_the_synodic_correction_as_error(surveyed):
     results = load_period_results(Archive(surveyed, create=False), 51511)
     # January (phc, both bands) says "ambiguous harmonic", March "confident".
