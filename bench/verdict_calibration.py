@@ -2,6 +2,7 @@
 
     python bench/verdict_calibration.py                  # ~2600 passes, 2 processes; recorded
     python bench/verdict_calibration.py --seeds 1 --no-cycles --no-record --out /tmp/verdicts.png
+    python bench/verdict_calibration.py --chart-only     # redraw the chart from the last record
 
 Injected passes whose truth is known independently of the search:
 
@@ -57,7 +58,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bench.record import command, figure, record, today  # noqa: E402
+from bench.record import command, figure, latest, record, today  # noqa: E402
 
 OUTPUT = ROOT / "docs" / "img" / "period_verdicts.png"
 CYCLES = (1.5, 2.0, 2.5, 3.0, 4.0, 6.0, 10.0, 25.0, 60.0, 150.0)
@@ -499,7 +500,7 @@ def chart(table, path: Path) -> None:
     stacked(fig.add_subplot(grid[0, 0]), "cycles_bin", list(CYCLES), "cycles of the true period in the pass")
     ax = fig.axes[-1]
     ax.set_title("(a) verdict against cycles covered", fontsize="medium")
-    ax.legend(fontsize="x-small", loc="lower right", framealpha=0.9)
+    handles, labels = ax.get_legend_handles_labels()
     stacked(fig.add_subplot(grid[0, 1]), "snr", list(SNR), "S/N per sample (peak-to-peak / noise)")
     fig.axes[-1].set_title("(b) against S/N", fontsize="medium")
     stacked(fig.add_subplot(grid[0, 2]), "sampling", list(SAMPLINGS), "sampling")
@@ -550,9 +551,37 @@ def chart(table, path: Path) -> None:
     ax.set(xlim=(0, 102), xlabel="% right (95% interval)")
     ax.set_title("(e) how often each verdict is right", fontsize="medium")
     fig.suptitle(f"Verdict calibration of the period search: {len(table)} injected passes", fontsize="medium")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 0.94))
+    fig.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, 0.965), ncol=len(VERDICTS), fontsize="small")
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=100)
+
+
+PACKED = ("kind", "source", "sampling", "verdict")
+
+
+def packed(table) -> dict:
+    """The per-pass table in the record: categories as indices, numbers rounded."""
+    out = {"categories": {}}
+    for column in PACKED:
+        categories = sorted(set(table[column]))
+        out["categories"][column] = categories
+        out[column] = [categories.index(v) for v in table[column]]
+    out["cycles_bin"] = [None if not math.isfinite(v) else float(v) for v in table.cycles_bin]
+    out["snr"] = [None if not math.isfinite(v) else round(float(v), 3) for v in table.snr]
+    out["right"] = [int(v) for v in table.right]
+    return out
+
+
+def unpacked(data: dict):
+    """The table `packed` stored."""
+    import pandas as pd
+
+    columns = {c: [data["categories"][c][i] for i in data[c]] for c in PACKED}
+    columns["cycles_bin"] = [math.nan if v is None else v for v in data["cycles_bin"]]
+    columns["snr"] = [math.nan if v is None else v for v in data["snr"]]
+    columns["right"] = [bool(v) for v in data["right"]]
+    return pd.DataFrame(columns)
 
 
 def main(argv=None) -> int:
@@ -565,9 +594,22 @@ def main(argv=None) -> int:
     parser.add_argument("--processes", type=int, default=None)
     parser.add_argument("--out", type=Path, default=OUTPUT)
     parser.add_argument("--no-record", action="store_true", help="draw the chart only; record nothing")
+    parser.add_argument(
+        "--chart-only", action="store_true", help="redraw the chart from the last recorded run; analyse nothing"
+    )
     args = parser.parse_args(argv)
 
     import pandas as pd
+
+    if args.chart_only:
+        recorded = latest("verdict_calibration")
+        if recorded is None or "passes" not in (recorded["data"] or {}):
+            raise SystemExit(
+                "no recorded run with its passes in docs/benchmarks/history.jsonl; run without --chart-only"
+            )
+        chart(unpacked(recorded["data"]["passes"]), args.out)
+        print(f"wrote {args.out}")
+        return 0
 
     from rsodb.pool import imap_in_pool
 
@@ -669,6 +711,7 @@ def main(argv=None) -> int:
             for kind in ("periodic", "noise", "single glint", "tumbling")
         },
     }
+    data["passes"] = packed(table)
     record("verdict_calibration", command("verdict_calibration.py", argv), figures, section, data)
     return 0
 
