@@ -1,6 +1,6 @@
 """Verdict calibration of the period search: how often each verdict is right, and where it is issued.
 
-    python bench/verdict_calibration.py                  # ~2600 passes, 2 processes; recorded
+    python bench/verdict_calibration.py                  # ~2000 passes, 2 processes; recorded
     python bench/verdict_calibration.py --seeds 1 --no-cycles --no-record --out /tmp/verdicts.png
     python bench/verdict_calibration.py --chart-only     # redraw the chart from the last record
 
