@@ -11,8 +11,20 @@ import json
 from pathlib import Path
 from types import MappingProxyType
 
-__all__ = ["parse_tle", "tle_norad", "tle_cospar", "parse_omm", "omm_norad", "tle_checksum", "read_tle_catalogue"]
+__all__ = [
+    "parse_tle",
+    "tle_norad",
+    "tle_cospar",
+    "parse_omm",
+    "omm_norad",
+    "tle_checksum",
+    "read_tle_catalogue",
+    "check_norad",
+    "MAX_NORAD",
+]
 
+# The largest catalogue number: OMM's NORAD_CAT_ID has nine digits (TLEs five, Alpha-5 six).
+MAX_NORAD = 999_999_999
 _ALPHA5 = "ABCDEFGHJKLMNPQRSTUVWXYZ"  # Alpha-5 catalogue numbers skip I and O
 _TLE_LINE_LENGTH = 69
 
@@ -85,6 +97,23 @@ def parse_tle(lines: str | Sequence[str]) -> tuple[str, ...]:
     return tuple(lines)
 
 
+def check_norad(value) -> int:
+    """A NORAD catalogue number from text or a number, checked to lie in 1..`MAX_NORAD`.
+
+    Raises
+    ------
+    ValueError
+        One sentence quoting the value (callers prefix the field's name).
+
+    >>> check_norad(" 22076 ")
+    22076
+    """
+    text = str(value).strip()
+    if not text.isdigit() or not 0 < int(text) <= MAX_NORAD:
+        raise ValueError(f"{text[:40]!r} is not a catalogue number (1..{MAX_NORAD})")
+    return int(text)
+
+
 def tle_norad(tle: tuple[str, ...]) -> int:
     """NORAD number of a TLE (Alpha-5 numbers such as ``A0001`` = 100001 included)."""
     field = tle[-2][2:7].strip()
@@ -128,10 +157,12 @@ def parse_omm(text: str) -> Mapping:
 def omm_norad(record: Mapping) -> int:
     """NORAD number of an OMM record."""
     value = record["NORAD_CAT_ID"]
+    if isinstance(value, bool) or not isinstance(value, (int, str)):
+        raise ValueError(f"the OMM NORAD_CAT_ID {value!r} is not an integer")
     try:
-        return int(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"the OMM NORAD_CAT_ID {value!r} is not an integer") from None
+        return check_norad(value)
+    except ValueError as exc:
+        raise ValueError(f"the OMM NORAD_CAT_ID {exc}") from None
 
 
 def read_tle_catalogue(path) -> list[tuple[str, ...]]:
