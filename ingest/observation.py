@@ -135,7 +135,9 @@ class Pass:
         if isinstance(self.norad, bool) or not isinstance(self.norad, (int, np.integer)):
             raise TypeError(f"pass {self.source_name!r}: norad={self.norad!r} must be an integer catalogue number")
         if not 0 < int(self.norad) <= MAX_NORAD:
-            raise ValueError(f"pass {self.source_name!r}: norad={self.norad} is not a catalogue number (1..{MAX_NORAD})")
+            raise ValueError(
+                f"pass {self.source_name!r}: norad={self.norad} is not a catalogue number (1..{MAX_NORAD})"
+            )
         object.__setattr__(self, "norad", int(self.norad))
         object.__setattr__(self, "row_problems", tuple(self.row_problems))
         object.__setattr__(self, "warnings", tuple(self.warnings))

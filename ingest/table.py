@@ -270,7 +270,9 @@ def _parse_line_by_line(text: TextFile, lines: np.ndarray, columns: tuple[Column
         tokens = _split(raw, delimiter)
         if len(tokens) != expected:
             if number == text.n_lines and len(tokens) < expected and not text.ends_with_newline:
-                reason = f"the last row has {len(tokens)} of {expected} columns and no line end: the file looks truncated"
+                reason = (
+                    f"the last row has {len(tokens)} of {expected} columns and no line end: the file looks truncated"
+                )
             else:
                 reason = f"the row has {len(tokens)} columns, expected {expected} ({labels})"
             problems.append(RowProblem(number, reason, raw))

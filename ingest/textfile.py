@@ -10,8 +10,8 @@ byte buffer, so a clean 400 kB file costs well under a millisecond.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
 import fcntl
+from functools import cached_property
 import hashlib
 import os
 from pathlib import Path

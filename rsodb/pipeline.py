@@ -106,7 +106,7 @@ def run_pipeline(
     )
     summary["periods"] = {r.pass_id: {"period_s": r.best_period_s, "verdict": r.verdict} for r in survey.results}
 
-    rows = archive.catalog()
+    rows = archive.summaries()
     norads = sorted({row.norad for row in rows})
     if fit and rows:
         outcomes = _fit_all(archive, rows, fit_config, fit_name, workers, progress)

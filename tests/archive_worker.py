@@ -111,7 +111,7 @@ def run_reader(args) -> int:
                 say(f"ERROR {item.pass_id}: {differing} differs from {path}")
                 errors += 1
             checked += 1
-        rows = archive.catalog(all_versions=True)
+        rows = archive.summaries(all_versions=True)
         shas = [row.source_sha256 for row in rows]
         if len(shas) != len(set(shas)):
             say(f"ERROR a file is stored twice: {len(shas)} rows, {len(set(shas))} distinct")

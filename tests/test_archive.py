@@ -78,7 +78,7 @@ def test_real_files_round_trip_exactly(real_archive):
 
 
 def test_pass_ids_are_readable_and_stable(real_archive, tmp_path):
-    ids = {row.pass_id for row in real_archive.catalog()}
+    ids = {row.pass_id for row in real_archive.summaries()}
     assert ids == {
         "22076-20240730T212240-V-derenivka",
         "44517-20250130T173650-V-derenivka",
@@ -88,7 +88,7 @@ def test_pass_ids_are_readable_and_stable(real_archive, tmp_path):
     }
     again = Archive(tmp_path / "again")
     again.ingest(list(reversed(REAL_FILES)), progress=False, workers=0)
-    assert {row.pass_id for row in again.catalog()} == ids
+    assert {row.pass_id for row in again.summaries()} == ids
 
 
 def test_filters_and_prefix_lookup(real_archive):
@@ -171,7 +171,7 @@ def test_layout_schema_and_plain_h5py(real_archive):
     with h5py.File(real_archive.object_path(51511), "r") as file:
         assert file.attrs["schema_version"] == 1
         assert file.attrs["norad"] == 51511
-        assert sorted(file["passes"]) == sorted(row.pass_id for row in real_archive.catalog(norad=51511))
+        assert sorted(file["passes"]) == sorted(row.pass_id for row in real_archive.summaries(norad=51511))
         samples = file["passes/51511-20250130T171941-B-uzhhorod/samples"]
         assert samples.shape == (692,)
         assert set(json.loads(file.attrs["sample_units"])) >= set(samples.dtype.names)
@@ -190,7 +190,7 @@ def test_documented_snippet_reads_the_archive_with_h5py_and_pandas(real_archive)
     namespace = {"ARCHIVE": str(real_archive.path)}
     exec(compile(_doc_snippet(), "docs/archive.md", "exec"), namespace)
     catalog, samples = namespace["catalog"], namespace["samples"]
-    rows = real_archive.catalog(all_versions=True)
+    rows = real_archive.summaries(all_versions=True)
     assert sorted(catalog["pass_id"]) == sorted(row.pass_id for row in rows)
     assert catalog["start_utc"].dtype.kind == "M"
     (topex,) = ingest.read_file(TOPEX_PHV)
@@ -380,7 +380,7 @@ def test_process_pool_gives_the_same_archive(tmp_path, shared_data):
 def test_a_damaged_object_file_is_named(real_archive):
     real_archive.object_path(44517).write_bytes(b"not HDF5 at all")
     with pytest.raises(OSError, match=r"44517\.h5 cannot be read as HDF5 .*restore it from a backup"):
-        Archive(real_archive.path).catalog()
+        Archive(real_archive.path).summaries()
 
 
 def test_a_killed_creation_does_not_block_the_next(tmp_path):

@@ -106,7 +106,7 @@ def check_archive(path: Path, committed: dict[str, list[str]], expected: dict) -
     """Everything the crash guarantee promises; returns the number of stored passes."""
     archive = Archive(path)  # opening removes what killed writers left behind
     assert not [name for name in os.listdir(archive.objects_dir) if name.endswith(".tmp")]
-    rows = archive.catalog(all_versions=True)
+    rows = archive.summaries(all_versions=True)
     shas = [row.source_sha256 for row in rows]
     assert len(shas) == len(set(shas)), "a file was stored twice"
     stored_ids = {row.pass_id for row in rows}

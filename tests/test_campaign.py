@@ -49,7 +49,7 @@ def archive(tmp_path_factory):
 def test_campaign_fits_every_pass_then_skips_them_and_reports(archive, tmp_path, capsys):
     config = FitConfig.from_dict(FIT)
     first = run_campaign(archive, 22076, config=config, n_workers=2, progress=False)
-    ids = [row.pass_id for row in archive.catalog(22076)]
+    ids = [row.pass_id for row in archive.summaries(22076)]
     assert len(ids) == 2 and first.ok
     assert sorted(r["pass_id"] for r in first.fitted) == sorted(ids)
     assert all(archive.result_names(p, "fits") == ["camp"] for p in ids)
@@ -93,7 +93,7 @@ def test_campaign_reports_a_failed_pass_and_carries_on(archive):
 def test_campaigns_share_one_client_and_report_per_group(archive):
     # Two configurations side by side (as the pipeline runs one per model): one fits its pass,
     # the other fails on its pass; each outcome holds only its own group's passes.
-    first, second = [row.pass_id for row in archive.catalog(22076)]
+    first, second = [row.pass_id for row in archive.summaries(22076)]
     good = FitConfig.from_dict(dict(FIT, name="groupgood"))
     bad = FitConfig.from_dict(dict(FIT, name="groupbad", parameters={}))
     outcomes = run_campaigns(archive, [(good, [first]), (bad, [second])], n_workers=2, progress=False)

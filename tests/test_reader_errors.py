@@ -197,8 +197,7 @@ def test_negative_or_zero_flux_sets_the_row_aside(tmp_path, lines, value):
     # was altered, so its values are not used; the rest of the file is (docs/formats.md).
     lines[FIRST_ROW + 1] = set_field(lines[FIRST_ROW + 1], 6, value)
     assert set_aside(write(tmp_path, lines)) == (
-        f":19: Flux {value} is not positive: ccd_phot never writes such a row because its magnitude would be "
-        "undefined"
+        f":19: Flux {value} is not positive: ccd_phot never writes such a row because its magnitude would be undefined"
     )
 
 

@@ -84,7 +84,7 @@ def select_passes(archive, norad: int | None = None, pass_ids=None, band: str | 
         return [archive.get(pass_id).pass_id for pass_id in pass_ids]
     if norad is None:
         raise ValueError("a campaign needs an object (--object NORAD) or a list of passes")
-    return [row.pass_id for row in archive.catalog(norad, band)]
+    return [row.pass_id for row in archive.summaries(norad, band)]
 
 
 def _fit_task(archive_path: str, pass_id: str, config_record: dict) -> dict:

@@ -23,7 +23,7 @@ def build_index(archive, written, fit_name: str | None) -> Document:
         The stored fit shown in the table (None: no fit column values).
     """
 
-    rows = archive.catalog()
+    rows = archive.summaries()
     names = {row.norad: row.name for row in rows}
     items = "".join(
         f'<li><a href="{html.escape(path.name)}">{html.escape(names.get(norad, str(norad)))} '
