@@ -45,15 +45,19 @@ class Column:
     label : str
         The column as the file names it (used in messages).
     kind : str
-        ``"float"`` (finite numbers required) or ``"text"`` (kept as bytes).
+        ``"float"`` or ``"text"`` (kept as bytes).
     width : int
         Bytes kept for text columns; longer tokens are truncated.
+    finite : bool
+        Whether a float must be finite (a NaN or infinity sets the row aside); False lets NaN
+        mean "no value" (CSV light curves).
     """
 
     key: str
     label: str
     kind: str = "float"
     width: int = 32
+    finite: bool = True
 
 
 @dataclass(frozen=True, eq=False)
@@ -128,7 +132,7 @@ def read_rows(
     rows = Rows({c.key: np.ascontiguousarray(values[c.key]) for c in columns}, lines.astype(np.int64))
     flags = RowFlags(text, rows, n_rows=len(rows) + len(problems), problems=problems)
     for column in columns:
-        if column.kind == "float":
+        if column.kind == "float" and column.finite:
             flags.check(
                 column.key,
                 np.isfinite(rows[column.key]),

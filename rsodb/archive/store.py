@@ -480,8 +480,10 @@ class Archive:
             current = [row for row in matches if row.is_current]
             return current[0] if current else matches[-1]
         if not matches:
-            if named:
-                for item in self._index.damaged(int(named.group(1))):
+            # A pass of a damaged object is not in the index: say so rather than "no pass".
+            digits = named.group(1) if named else re.match(r"^\d*", pass_id).group(0)
+            for item in self._index.damaged(int(digits)) if named else self._index.damaged() if digits else []:
+                if named or str(item.norad).startswith(digits):
                     raise DamagedObjectError(self.object_path(item.norad), item.reason)
             raise UnknownPassError(
                 f"no pass {pass_id!r} in archive {str(self.path)!r}; run 'rsodb ls --archive {self.path}' "
