@@ -148,7 +148,7 @@ def test_export_csv_round_trip(archive_dir, tmp_path, capsys):
     # The corrected magnitude is computed: 4 decimals, half a unit of the last one at most.
     assert np.max(np.abs(frame["mag_corrected"].to_numpy() - topex.mag_corrected)) <= 5e-5
     data = [line.split(",") for line in out.read_text().splitlines() if not line.startswith(("#", "time_utc"))]
-    assert all(re.fullmatch(r"\d+\.\d{4}", row[2]) for row in data)  # no 16-digit floats
+    assert all(re.fullmatch(r"-?\d+\.\d{4}", row[2]) for row in data)  # no 16-digit floats
     np.testing.assert_array_equal(frame["saturated"].to_numpy(), topex.saturated)
 
     # rsodb ingests its own CSV: into the archive it came from, a duplicate source of the pass;
