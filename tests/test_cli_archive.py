@@ -5,8 +5,8 @@ from __future__ import annotations
 import io
 import json
 import os
-import re
 from pathlib import Path
+import re
 import shutil
 
 import numpy as np

@@ -191,7 +191,7 @@ def band_key(band: str) -> str:
     and any other character as ``xNN`` (its code), so distinct bands give distinct ids.
 
     >>> band_key("V"), band_key("V'"), band_key("R_c")
-    ('V', 'Vp', 'Rx5f')
+    ('V', 'Vp', 'Rx5fc')
     """
     return "".join(c if c.isascii() and c.isalnum() else "p" if c == "'" else f"x{ord(c):02x}" for c in band) or "band"
 

@@ -736,14 +736,20 @@ class Archive:
         row = self.summary(pass_id)
         path = self.object_path(row.norad)
         with open_object(path) as file:
-            pass_group = file["passes"][row.pass_id]
-            if kind not in pass_group or name not in pass_group[kind]:
+            try:
+                pass_group = file["passes"][row.pass_id]
+                found = kind in pass_group and name in pass_group[kind]
                 stored = sorted(pass_group[kind]) if kind in pass_group else []
+                group = pass_group[kind][name] if found else None
+            except (KeyError, OSError, RuntimeError) as exc:
+                raise DamagedObjectError(
+                    path, f"pass {row.pass_id} cannot be read ({str(exc).splitlines()[0]})"
+                ) from None
+            if group is None:
                 raise UnknownPassError(
                     f"pass {row.pass_id!r} has no {kind} result named {name!r}; stored: "
                     f"{', '.join(stored) if stored else 'none'}"
                 )
-            group = pass_group[kind][name]
             check_result(group, path)
             return loader(group)
 
