@@ -18,6 +18,7 @@ import os
 from pathlib import Path
 import shutil
 import sqlite3
+from stat import S_ISREG
 
 import h5py
 
@@ -25,7 +26,7 @@ from ingest.observation import Pass
 from rsodb.archive import layout, versions
 from rsodb.archive.index import ObjectState
 from rsodb.archive.ingest_report import CommitEvent, DuplicateFile, IngestedFile, PendingFile
-from rsodb.archive.integrity import DamagedObjectError, open_object, seal_result
+from rsodb.archive.integrity import DamagedObjectError, seal_result
 from rsodb.archive.locking import ObjectLock, publish, stale_temp_files, temp_path
 from rsodb.archive.stored import DuplicateSource, PassSummary, ResultSummary
 from rsodb.storage import attr_text
@@ -36,6 +37,7 @@ __all__ = ["Staged", "ObjectTransaction", "stage_files", "stage_results", "stage
 # by replaced tables and results exceeds this share of the file.
 _REPACK_FRACTION = 0.25
 _REPACK_MIN_BYTES = 4 << 20
+_ROOT_ATTRS = ("name", "cospar", "freed_bytes", "schema_version")
 
 
 def utc_now() -> str:
@@ -45,13 +47,36 @@ def utc_now() -> str:
 
 @dataclass
 class Current:
-    """An object's state when its writer took the lock."""
+    """An object's state when its writer took the lock, read from the copy that becomes its next file.
 
-    file: h5py.File | None
+    Attributes
+    ----------
+    file : h5py.File
+        The copy of the object file (or a new file), open for writing.
+    tmp, final : Path
+    before : ObjectState or None
+        The identity of the object file that was copied; None for a new object.
+    rows : list of PassSummary
+    duplicates : list of DuplicateSource
+    attrs : dict
+        The root attributes.
+    """
+
+    file: h5py.File
+    tmp: Path
+    final: Path
+    before: ObjectState | None
     rows: list[PassSummary]
-    results: list[ResultSummary]
     duplicates: list[DuplicateSource]
     attrs: dict
+    _results: list[ResultSummary] | None = None
+
+    @property
+    def results(self) -> list[ResultSummary]:
+        """The stored results' summaries (read on first use: an ingest does not need them)."""
+        if self._results is None:
+            self._results = layout.read_results(self.file)
+        return self._results
 
     def samples_of(self, pass_id: str):
         return layout.read_samples(self.file["passes"][pass_id])
@@ -69,7 +94,9 @@ class Staged:
         The temporary file's identity (unchanged by the rename).
     name, cospar : str
     rows, results, duplicates : list
-        What the index records for the object.
+        What the index records for the object; `results` None when they did not change (the
+        index keeps its rows if it described the file that was copied, `before`).
+    before : ObjectState or None
     event : CommitEvent or None
         What an ingest reports once the file is published.
     """
@@ -81,8 +108,9 @@ class Staged:
     name: str
     cospar: str
     rows: list[PassSummary]
-    results: list[ResultSummary]
+    results: list[ResultSummary] | None
     duplicates: list[DuplicateSource]
+    before: ObjectState | None = None
     event: CommitEvent | None = None
 
 
@@ -104,6 +132,7 @@ class ObjectTransaction:
     lock_timeout_s: float | None = 600.0
     staged: list[Staged] = field(default_factory=list)
     _stack: ExitStack = field(default_factory=ExitStack)
+    _temp_names: set[str] | None = None
 
     def __enter__(self) -> ObjectTransaction:
         return self
@@ -118,54 +147,83 @@ class ObjectTransaction:
         lock = ObjectLock(self.objects_dir / layout.lock_file_name(norad), timeout_s=self.lock_timeout_s)
         lock.acquire()
         self._stack.callback(lock.release)
-        for path in stale_temp_files(self.objects_dir, layout.object_file_name(norad)):
-            path.unlink(missing_ok=True)
+        # Temporary files of killed writers of this object: listed once per round (a directory of
+        # 20,000 objects costs milliseconds to list); any writer that held this lock is done by now.
+        if self._temp_names is None:
+            self._temp_names = {path.name for path in stale_temp_files(self.objects_dir, "")}
+        prefix = f".{layout.object_file_name(norad)}."
+        for name in [name for name in self._temp_names if name.startswith(prefix)]:
+            (self.objects_dir / name).unlink(missing_ok=True)
+            self._temp_names.discard(name)
 
     def current(self, norad: int) -> Current:
-        """The object's state as stored now (its file stays open until the transaction ends)."""
-        final = self.objects_dir / layout.object_file_name(norad)
-        try:
-            file = open_object(final)
-        except FileNotFoundError:
-            return Current(None, [], [], [], {})
-        self._stack.callback(file.close)
-        try:
-            return Current(
-                file,
-                layout.read_catalog(file),
-                layout.read_results(file),
-                layout.read_duplicates(file),
-                {name: file.attrs[name] for name in file.attrs},
-            )
-        except (OSError, RuntimeError, KeyError, ValueError) as exc:
-            raise DamagedObjectError(final, f"its tables cannot be read ({str(exc).splitlines()[0]})") from None
-
-    def write(self, norad: int, current: Current, build: Callable[[h5py.File], None]) -> Path:
-        """Write the object's next file with `build` (given the open copy); returns the temporary path."""
+        """Copy the object's file to a temporary file and open the copy: its state, and the start
+        of its next state (`write` finishes it; `discard` drops it)."""
         final = self.objects_dir / layout.object_file_name(norad)
         tmp = temp_path(final)
+        self._stack.callback(tmp.unlink, missing_ok=True)  # removed unless renamed into place
+        before = _copy(norad, final, tmp)
+        if before is None:
+            file = h5py.File(tmp, "w", libver=layout.LIBVER)
+            layout.write_file_attributes(file, norad)
+            file.create_group("passes")
+            return Current(file, tmp, final, None, [], [], {}, [])
         try:
-            if current.file is None:
-                file = h5py.File(tmp, "w", libver=layout.LIBVER)
-                layout.write_file_attributes(file, norad)
-                file.create_group("passes")
-            elif int(current.attrs.get("freed_bytes", 0)) > max(
-                _REPACK_MIN_BYTES, _REPACK_FRACTION * final.stat().st_size
+            file = h5py.File(tmp, "r+", libver=layout.LIBVER)
+        except (OSError, RuntimeError, ValueError) as exc:
+            reason = "it is empty" if before.size == 0 else f"it cannot be opened as HDF5 ({_first_line(exc)})"
+            raise DamagedObjectError(final, reason) from None
+        self._stack.callback(file.close)  # closed by write or discard; here if staging fails
+        try:
+            if "schema_version" not in file.attrs or "passes" not in file:
+                raise DamagedObjectError(final, "it is an HDF5 file without the archive's root attributes and groups")
+            layout.check_schema(file, final)
+            return Current(
+                file,
+                tmp,
+                final,
+                before,
+                layout.read_catalog(file),
+                layout.read_duplicates(file),
+                # Attributes cost ~0.1 ms each through h5py: only those a commit uses.
+                {name: file.attrs[name] for name in _ROOT_ATTRS if name in file.attrs},
+            )
+        except (OSError, RuntimeError, KeyError, ValueError) as exc:
+            file.close()
+            if isinstance(exc, (DamagedObjectError, ValueError)) and not isinstance(exc, layout.DamagedPassError):
+                raise
+            raise DamagedObjectError(final, f"its tables cannot be read ({_first_line(exc)})") from None
+
+    def discard(self, current: Current) -> None:
+        """Nothing to write: drop the copy."""
+        current.file.close()
+        current.tmp.unlink(missing_ok=True)
+
+    def write(self, current: Current, build: Callable[[h5py.File], None]) -> Path:
+        """Finish the next file with `build` (given the open copy) and close it; returns its path.
+
+        The copy is repacked first (rewritten with only its live objects) once replaced tables and
+        results have left more than a quarter of it (and 4 MiB) as dead space.
+        """
+        file = current.file
+        try:
+            if current.before is not None and int(current.attrs.get("freed_bytes", 0)) > max(
+                _REPACK_MIN_BYTES, _REPACK_FRACTION * current.before.size
             ):
-                file = _repacked(current.file, tmp)
-            else:
-                shutil.copyfile(final, tmp)
-                file = h5py.File(tmp, "r+", libver=layout.LIBVER)
-            try:
-                build(file)
-                file.attrs["schema_version"] = layout.SCHEMA_VERSION
-                file.attrs["updated_utc"] = utc_now()
-            finally:
                 file.close()
-        except BaseException:
-            tmp.unlink(missing_ok=True)
-            raise
-        return tmp
+                packed = temp_path(current.final)
+                self._stack.callback(packed.unlink, missing_ok=True)
+                with h5py.File(current.tmp, "r") as source:
+                    file = _repacked(source, packed)
+                current.tmp.unlink()
+                current.tmp = packed
+            build(file)
+            if int(file.attrs.get("schema_version", 0)) != layout.SCHEMA_VERSION:
+                file.attrs["schema_version"] = layout.SCHEMA_VERSION
+            file.attrs["updated_utc"] = utc_now()
+        finally:
+            file.close()
+        return current.tmp
 
     def stage(self, staged: Staged) -> None:
         self.staged.append(staged)
@@ -181,11 +239,35 @@ class ObjectTransaction:
             raise
         try:
             self.index.replace_objects(
-                (item.state, item.name, item.cospar, item.rows, item.results, item.duplicates) for item in staged
+                (item.state, item.name, item.cospar, item.rows, item.results, item.duplicates, item.before)
+                for item in staged
             )
         except sqlite3.Error:
             pass  # the files are committed; the index sees they changed and reads them again
         return staged
+
+
+def _first_line(exc: BaseException) -> str:
+    return (str(exc) or type(exc).__name__).splitlines()[0]
+
+
+def _copy(norad: int, final: Path, tmp: Path) -> ObjectState | None:
+    """Byte-copy the object file to `tmp` (the kernel copies it); its identity, or None if there is none."""
+    try:
+        source = open(final, "rb")  # noqa: SIM115 - closed below, after fstat
+    except FileNotFoundError:
+        return None
+    except IsADirectoryError:
+        raise DamagedObjectError(final, "it is a directory, where an HDF5 object file should be") from None
+    except OSError as exc:
+        raise DamagedObjectError(final, f"it cannot be read ({exc.strerror})") from None
+    with source:
+        stat = os.fstat(source.fileno())
+        if not S_ISREG(stat.st_mode):
+            raise DamagedObjectError(final, "it is not a regular file, where an HDF5 object file should be")
+        with open(tmp, "wb") as target:
+            shutil.copyfileobj(source, target, 1 << 20)
+    return ObjectState.of(norad, stat)
 
 
 def _state(norad: int, tmp: Path) -> ObjectState:
@@ -272,6 +354,7 @@ def stage_files(transaction: ObjectTransaction, norad: int, files: Sequence[Pend
         norad=norad, ingested=tuple(ingested), already_present=tuple(present), duplicates=tuple(duplicate_files)
     )
     if not to_write and len(duplicates) == len(current.duplicates):
+        transaction.discard(current)
         return event
     rows.sort(key=lambda row: (row.start_utc, row.pass_id))
     name, cospar = _object_names(current, [pass_ for pass_, _ in to_write])
@@ -285,7 +368,7 @@ def stage_files(transaction: ObjectTransaction, norad: int, files: Sequence[Pend
         if len(duplicates) != len(current.duplicates):
             freed += _table_bytes(file, "duplicates")
             layout.write_duplicates(file, duplicates)
-        if "results" not in file and current.results:
+        if "results" not in file and current.before is not None and current.results:
             layout.write_results(file, current.results)  # a schema-1 file: its results get their table
         file.attrs["freed_bytes"] = freed
         # Attributes cost ~0.1 ms each: write the object's name only when it changes.
@@ -293,18 +376,20 @@ def stage_files(transaction: ObjectTransaction, norad: int, files: Sequence[Pend
             if value and attr_text(current.attrs.get(key, "")) != value:
                 file.attrs[key] = value
 
-    tmp = transaction.write(norad, current, build)
+    tmp = transaction.write(current, build)
+    results = current._results if current.before is not None else []  # None: unchanged, not read
     transaction.stage(
         Staged(
             norad,
-            transaction.objects_dir / layout.object_file_name(norad),
+            current.final,
             tmp,
             _state(norad, tmp),
             name,
             cospar,
             rows,
-            current.results,
+            results,
             duplicates,
+            current.before,
             event,
         )
     )
@@ -339,18 +424,18 @@ def stage_results(transaction: ObjectTransaction, norad: int, entries: Iterable[
             group.attrs["stored_utc"] = now
             group.attrs["result_type"] = f"{type(result).__module__}.{type(result).__qualname__}"
             result.to_hdf5(group)
-            seal_result(group)
-            results[(pass_id, kind, name)] = layout.result_summary(pass_id, kind, name, group)
+            attrs = seal_result(group)
+            results[(pass_id, kind, name)] = layout.result_summary(pass_id, kind, name, group, attrs)
         freed += _table_bytes(file, "results")
         layout.write_results(file, sorted(results.values(), key=lambda item: (item.pass_id, item.kind, item.name)))
         file.attrs["freed_bytes"] = freed
 
-    tmp = transaction.write(norad, current, build)
+    tmp = transaction.write(current, build)
     name, cospar = _object_names(current, [])
     transaction.stage(
         Staged(
             norad,
-            transaction.objects_dir / layout.object_file_name(norad),
+            current.final,
             tmp,
             _state(norad, tmp),
             name,
@@ -358,6 +443,7 @@ def stage_results(transaction: ObjectTransaction, norad: int, entries: Iterable[
             current.rows,
             list(results.values()),
             current.duplicates,
+            current.before,
         )
     )
 
@@ -374,11 +460,13 @@ def stage_metadata(
         try:
             metadata = layout.read_metadata(current.file["passes"][pass_id])
         except layout.DamagedPassError as exc:
-            raise DamagedObjectError(transaction.objects_dir / layout.object_file_name(norad), str(exc)) from None
+            transaction.discard(current)
+            raise DamagedObjectError(current.final, str(exc)) from None
         new = change(dict(metadata))
         if new is not None:
             updated[pass_id] = new
     if not updated:
+        transaction.discard(current)
         return []
     rows = [
         replace(row, elements=_elements_of(updated[row.pass_id])) if row.pass_id in updated else row
@@ -391,19 +479,11 @@ def stage_metadata(
         file.attrs["freed_bytes"] = int(file.attrs.get("freed_bytes", 0)) + _table_bytes(file, "catalog")
         layout.write_catalog(file, rows)
 
-    tmp = transaction.write(norad, current, build)
+    tmp = transaction.write(current, build)
     name, cospar = _object_names(current, [])
     transaction.stage(
         Staged(
-            norad,
-            transaction.objects_dir / layout.object_file_name(norad),
-            tmp,
-            _state(norad, tmp),
-            name,
-            cospar,
-            rows,
-            current.results,
-            current.duplicates,
+            norad, current.final, tmp, _state(norad, tmp), name, cospar, rows, None, current.duplicates, current.before
         )
     )
     return sorted(updated)

@@ -314,16 +314,38 @@ class CatalogIndex:
 
         Parameters
         ----------
-        entries : iterable of (ObjectState, name, cospar, passes, results, duplicates)
+        entries : iterable of (ObjectState, name, cospar, passes, results, duplicates[, before])
             Per object: the file's identity, the object's name and COSPAR id, its catalog rows,
-            result summaries and duplicate sources.
+            result summaries and duplicate sources. `results` None means "unchanged": the index
+            keeps its result rows if it described the file the commit started from (`before`);
+            otherwise it records the object as stale, to be read again from its file.
         """
         with self._lock, _transaction(self._db) as db:
-            for state, name, cospar, passes, results, duplicates in entries:
-                self._delete(db, state.norad)
+            for state, name, cospar, passes, results, duplicates, *before in entries:
+                stale = False
+                if results is None:
+                    row = db.execute(
+                        "SELECT ino, size, mtime_ns FROM objects WHERE norad = ? AND status = 'ok'", (state.norad,)
+                    ).fetchone()
+                    previous = before[0] if before else None
+                    stale = (
+                        previous is None
+                        or row is None
+                        or tuple(row) != (previous.ino, previous.size, previous.mtime_ns)
+                    )
+                self._delete(db, state.norad, keep_results=results is None and not stale)
                 db.execute(
                     "INSERT INTO objects VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
-                    (state.norad, state.ino, state.size, state.mtime_ns, state.status, state.error, name, cospar),
+                    (
+                        state.norad,
+                        -1 if stale else state.ino,  # -1 never matches a file: read it again
+                        state.size,
+                        state.mtime_ns,
+                        state.status,
+                        state.error,
+                        name,
+                        cospar,
+                    ),
                 )
                 db.executemany(_INSERT_PASS, [_pass_values(row) for row in passes])
                 db.executemany(
@@ -340,7 +362,7 @@ class CatalogIndex:
                             item.period_err_s,
                             item.verdict,
                         )
-                        for item in results
+                        for item in results or ()
                     ],
                 )
                 db.executemany(
@@ -367,8 +389,8 @@ class CatalogIndex:
                 self._delete(db, int(norad))
 
     @staticmethod
-    def _delete(db: sqlite3.Connection, norad: int) -> None:
-        for table in ("objects", "passes", "results", "sources"):
+    def _delete(db: sqlite3.Connection, norad: int, keep_results: bool = False) -> None:
+        for table in ("objects", "passes", "sources") if keep_results else ("objects", "passes", "results", "sources"):
             db.execute(f"DELETE FROM {table} WHERE norad = ?", (norad,))
 
     def clear(self) -> None:

@@ -21,7 +21,15 @@ import numpy as np
 from rsodb.archive import layout
 from rsodb.storage import attr_text
 
-__all__ = ["DamagedObjectError", "open_object", "result_sha256", "seal_result", "check_result", "verify_object"]
+__all__ = [
+    "DamagedObjectError",
+    "open_object",
+    "result_sha256",
+    "read_attrs",
+    "seal_result",
+    "check_result",
+    "verify_object",
+]
 
 
 class DamagedObjectError(OSError):
@@ -96,31 +104,41 @@ def _first_line(exc: BaseException) -> str:
     return (str(exc) or type(exc).__name__).splitlines()[0]
 
 
-def result_sha256(group: h5py.Group) -> str:
+def result_sha256(group: h5py.Group, attrs: dict | None = None) -> str:
     """SHA-256 of everything a stored result holds: its attributes and datasets, recursively
-    (names sorted), its own ``content_sha256`` attribute excluded."""
+    (names sorted), its own ``content_sha256`` attribute excluded.
+
+    Parameters
+    ----------
+    attrs : dict, optional
+        The group's own attributes, when the caller has read them already.
+    """
     digest = hashlib.sha256()
+    if attrs is None:
+        attrs = read_attrs(group)
 
-    def add_attrs(node) -> None:
-        for name in sorted(node.attrs):
-            if node is group and name == "content_sha256":
+    def add_attrs(values: dict) -> None:
+        for name in sorted(values):
+            if values is attrs and name == "content_sha256":
                 continue
-            value = node.attrs[name]
             digest.update(name.encode())
-            digest.update(_value_bytes(value))
+            digest.update(_value_bytes(values[name]))
 
-    def visit(name: str, node) -> None:
-        digest.update(name.encode())
-        add_attrs(node)
-        if isinstance(node, h5py.Dataset):
-            digest.update(_value_bytes(node[()]))
-
-    add_attrs(group)
+    add_attrs(attrs)
     names = []
     group.visit(names.append)
     for name in sorted(names):
-        visit(name, group[name])
+        node = group[name]
+        digest.update(name.encode())
+        add_attrs(read_attrs(node))
+        if isinstance(node, h5py.Dataset):
+            digest.update(_value_bytes(node[()]))
     return digest.hexdigest()
+
+
+def read_attrs(node) -> dict:
+    """Every attribute of an HDF5 group or dataset, read once."""
+    return {name: node.attrs[name] for name in node.attrs}
 
 
 def _value_bytes(value) -> bytes:
@@ -134,9 +152,10 @@ def _value_bytes(value) -> bytes:
     return np.ascontiguousarray(array).tobytes()
 
 
-def seal_result(group: h5py.Group) -> None:
+def seal_result(group: h5py.Group) -> dict:
     """Give a result just written by its ``to_hdf5`` checksums: each dataset rewritten with a
-    Fletcher32 filter (keeping its compression and attributes), then the result's SHA-256."""
+    Fletcher32 filter (keeping its compression and attributes), then the result's SHA-256.
+    Returns the group's attributes (read once, for the caller's summary)."""
     names = []
     group.visit(names.append)
     for name in names:
@@ -154,7 +173,10 @@ def seal_result(group: h5py.Group) -> None:
         )
         for key, value in attrs.items():
             copy.attrs[key] = value
-    group.attrs["content_sha256"] = result_sha256(group)
+    attrs = read_attrs(group)
+    attrs["content_sha256"] = result_sha256(group, attrs)
+    group.attrs["content_sha256"] = attrs["content_sha256"]
+    return attrs
 
 
 def check_result(group: h5py.Group, path) -> None:

@@ -570,14 +570,15 @@ def _finite(value) -> float:
     return value
 
 
-def result_summary(pass_id: str, kind: str, name: str, group: h5py.Group) -> ResultSummary:
+def result_summary(pass_id: str, kind: str, name: str, group: h5py.Group, attrs=None) -> ResultSummary:
     """What the catalog keeps of a stored result: when, what, and its period and verdict.
 
     The period is the result's ``best_period_s`` attribute (a period search) and its error
     ``uncertainty_s``; a fit gives its spin period through its ``summary`` row named
     ``spin_period_s`` (median, half the 16-84 % width). Any result may have a ``verdict``.
+    `attrs` are the group's attributes when the caller has read them already.
     """
-    attrs = group.attrs
+    attrs = group.attrs if attrs is None else attrs
     period = _finite(attrs.get("best_period_s", float("nan")))
     error = _finite(attrs.get("uncertainty_s", float("nan")))
     if not np.isfinite(period) and "summary" in group:

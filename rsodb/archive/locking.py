@@ -165,8 +165,9 @@ def replacing(final_path: Path, durable: bool = True) -> Iterator[Path]:
 
 
 def stale_temp_files(directory: Path, final_name: str) -> list[Path]:
-    """Temporary files that writers of `final_name` left in `directory` (call with its lock held)."""
-    prefix = f".{final_name}."
+    """Temporary files that writers of `final_name` left in `directory` (call with its lock held);
+    `final_name` "" lists those of every file."""
+    prefix = f".{final_name}." if final_name else "."
     try:
         names = os.listdir(directory)
     except FileNotFoundError:
