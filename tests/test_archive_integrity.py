@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import sqlite3
 import struct
 
 import h5py
@@ -202,3 +203,24 @@ def test_two_archives_see_each_others_commits(real_archive, tmp_path):
     assert reader.get("44517-20250131").pass_id == "44517-20250131T173650-V-derenivka"
     b, _ = ingest.read_file(COSMOS2553_PHC)
     np.testing.assert_array_equal(reader.get("51511-20250130T171941-B").mag, b.mag)
+
+
+def test_a_damaged_index_is_replaced_and_a_failing_one_is_a_clear_error(real_archive, capsys):
+    index = real_archive.path / layout.INDEX_NAME
+    Archive(real_archive.path).summaries()
+    with sqlite3.connect(index) as db:  # everything into the main file, then damage all but its first page
+        db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+    data = bytearray(index.read_bytes())
+    data[4096:] = b"\x5a" * (len(data) - 4096)
+    index.write_bytes(bytes(data))
+    # Opening finds it unreadable and builds a new one from the object files.
+    assert main(["ls", "--archive", str(real_archive.path), "--json"]) == 0
+    assert len(json.loads(capsys.readouterr().out)) == 5
+    # Damage that shows only later, in an open index, is a one-sentence error naming the fix.
+    opened = Archive(real_archive.path)
+    opened._index._db.close()
+    opened._index._db = sqlite3.connect(":memory:", check_same_thread=False)  # no tables: every query fails
+    with pytest.raises(OSError, match=r"the catalog index .* cannot be read .*run 'rsodb check --archive"):
+        opened.summaries(norad=22076)
+    assert main(["check", "--archive", str(real_archive.path), "--no-progress"]) == 0
+    assert "index rebuilt (3 objects)" in capsys.readouterr().out

@@ -32,7 +32,7 @@ def archive_dir(tmp_path, shared_data, capsys):
     return archive
 
 
-@pytest.mark.parametrize("command", ["ingest", "ls", "show", "export", "check"])
+@pytest.mark.parametrize("command", ["ingest", "ls", "show", "export", "check", "elements"])
 def test_every_command_has_help_with_an_example(command, capsys):
     with pytest.raises(SystemExit) as exit_info:
         main([command, "--help"])

@@ -18,6 +18,7 @@ listed as damaged with the reason; its passes leave the index until it is repair
 from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 import os
 from pathlib import Path
@@ -29,7 +30,7 @@ import numpy as np
 
 from rsodb.archive.stored import DamagedObject, DuplicateSource, PassSummary, ResultSummary
 
-__all__ = ["CatalogIndex", "ObjectState", "PassQuery", "INDEX_VERSION"]
+__all__ = ["CatalogIndex", "ObjectState", "PassQuery", "DamagedIndexError", "INDEX_VERSION"]
 
 INDEX_VERSION = 1
 # SQLite waits this long for another process's write transaction.
@@ -258,6 +259,10 @@ def _summary(row: tuple) -> PassSummary:
     )
 
 
+class DamagedIndexError(OSError):
+    """The catalog index cannot be read; it holds nothing the object files do not."""
+
+
 class CatalogIndex:
     """The SQLite index of one archive.
 
@@ -265,7 +270,8 @@ class CatalogIndex:
     ----------
     path : Path
         ``catalog.sqlite`` in the archive directory. When it cannot be opened for writing (a
-        read-only archive), the index lives in memory for this process.
+        read-only archive), the index lives in memory for this process. A file that is not a
+        readable index is replaced by an empty one (the object files are read into it again).
     """
 
     def __init__(self, path: Path):
@@ -275,13 +281,15 @@ class CatalogIndex:
         try:
             self._db = self._connect(self.path)
         except sqlite3.DatabaseError:
-            # A damaged index is rebuilt: it holds nothing the object files do not.
-            for suffix in ("", "-wal", "-shm"):
-                Path(f"{self.path}{suffix}").unlink(missing_ok=True)
+            self._remove_files()
             self._db = self._connect(self.path)
         except OSError:
             self._db = self._connect(":memory:")
             self.in_memory = True
+
+    def _remove_files(self) -> None:
+        for suffix in ("", "-wal", "-shm"):
+            Path(f"{self.path}{suffix}").unlink(missing_ok=True)
 
     @staticmethod
     def _connect(target) -> sqlite3.Connection:
@@ -293,16 +301,41 @@ class CatalogIndex:
             # The index is rebuilt from the object files whenever it disagrees with them, so a
             # transaction lost to a power cut costs a re-read, never a wrong answer.
             db.execute("PRAGMA synchronous=NORMAL")
-            db.executescript(_SCHEMA)
-            version = db.execute("SELECT value FROM meta WHERE key = 'version'").fetchone()
-            if version is not None and int(version[0]) != INDEX_VERSION:
+            try:
+                row = db.execute("SELECT value FROM meta WHERE key = 'version'").fetchone()
+            except sqlite3.OperationalError:  # a new index: no tables yet
+                row = None
+            if row is None or int(row[0]) != INDEX_VERSION:
+                db.executescript(_SCHEMA)
                 db.executescript("DELETE FROM objects; DELETE FROM passes; DELETE FROM results; DELETE FROM sources;")
-            db.execute("INSERT OR REPLACE INTO meta VALUES ('version', ?)", (str(INDEX_VERSION),))
-            db.execute("PRAGMA quick_check(1)")
+                db.execute("INSERT OR REPLACE INTO meta VALUES ('version', ?)", (str(INDEX_VERSION),))
         except sqlite3.DatabaseError:
             db.close()
             raise
         return db
+
+    @contextmanager
+    def guarded(self):
+        """Hold the lock; turn SQLite's errors into one-sentence ones callers already handle."""
+        with self._lock:
+            try:
+                yield self._db
+            except sqlite3.OperationalError as exc:
+                if "locked" in str(exc) or "busy" in str(exc):
+                    raise TimeoutError(
+                        f"the catalog index {self.path} stayed locked by another process for {_BUSY_TIMEOUT_S:g} s; "
+                        "try again when the other ingest or fit has finished"
+                    ) from None
+                raise DamagedIndexError(self._damaged(exc)) from None
+            except sqlite3.DatabaseError as exc:
+                raise DamagedIndexError(self._damaged(exc)) from None
+
+    def _damaged(self, exc: Exception) -> str:
+        archive = self.path.parent
+        return (
+            f"the catalog index {self.path} cannot be read ({exc}); it is derived from the object files: "
+            f"run 'rsodb check --archive {archive}' to rebuild it"
+        )
 
     def close(self) -> None:
         with self._lock:
@@ -320,7 +353,7 @@ class CatalogIndex:
             keeps its result rows if it described the file the commit started from (`before`);
             otherwise it records the object as stale, to be read again from its file.
         """
-        with self._lock, _transaction(self._db) as db:
+        with self.guarded() as connection, _transaction(connection) as db:
             for state, name, cospar, passes, results, duplicates, *before in entries:
                 stale = False
                 if results is None:
@@ -375,7 +408,7 @@ class CatalogIndex:
 
     def mark_damaged(self, state: ObjectState) -> None:
         """Record that an object's file cannot be read: its passes leave the index."""
-        with self._lock, _transaction(self._db) as db:
+        with self.guarded() as connection, _transaction(connection) as db:
             self._delete(db, state.norad)
             db.execute(
                 "INSERT INTO objects VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
@@ -384,7 +417,7 @@ class CatalogIndex:
 
     def remove_objects(self, norads: Iterable[int]) -> None:
         """Forget objects whose files are gone."""
-        with self._lock, _transaction(self._db) as db:
+        with self.guarded() as connection, _transaction(connection) as db:
             for norad in norads:
                 self._delete(db, int(norad))
 
@@ -394,17 +427,23 @@ class CatalogIndex:
             db.execute(f"DELETE FROM {table} WHERE norad = ?", (norad,))
 
     def clear(self) -> None:
-        """Forget everything (before a rebuild)."""
-        with self._lock, _transaction(self._db) as db:
-            for table in ("objects", "passes", "results", "sources"):
-                db.execute(f"DELETE FROM {table}")
-            db.execute("DELETE FROM meta WHERE key = 'swept_dir'")
+        """Forget everything (before a rebuild); a damaged index file is replaced by a new one."""
+        try:
+            with self.guarded() as connection, _transaction(connection) as db:
+                for table in ("objects", "passes", "results", "sources"):
+                    db.execute(f"DELETE FROM {table}")
+                db.execute("DELETE FROM meta WHERE key = 'swept_dir'")
+        except DamagedIndexError:
+            with self._lock:
+                self._db.close()
+                self._remove_files()
+                self._db = self._connect(self.path)
 
     # -- freshness ------------------------------------------------------------------------------
     def states(self, norads: Iterable[int] | None = None) -> dict[int, ObjectState]:
         """The recorded identity of every object (or of `norads`)."""
         query = "SELECT norad, ino, size, mtime_ns, status, error FROM objects"
-        with self._lock:
+        with self.guarded():
             if norads is None:
                 rows = self._db.execute(query).fetchall()
             else:
@@ -417,7 +456,7 @@ class CatalogIndex:
 
     def directory_unchanged(self, stat: os.stat_result) -> bool:
         """True when the objects directory is as it was at the last complete sweep."""
-        with self._lock:
+        with self.guarded():
             row = self._db.execute("SELECT value FROM meta WHERE key = 'swept_dir'").fetchone()
         return row is not None and row[0] == f"{stat.st_ino}:{stat.st_mtime_ns}"
 
@@ -425,7 +464,7 @@ class CatalogIndex:
         """Note that every object file of the directory in `stat` was found indexed and current."""
         if time.time_ns() - stat.st_mtime_ns < _SETTLED_NS:
             return  # it may still change within the same clock tick
-        with self._lock:
+        with self.guarded():
             self._db.execute(
                 "INSERT OR REPLACE INTO meta VALUES ('swept_dir', ?)", (f"{stat.st_ino}:{stat.st_mtime_ns}",)
             )
@@ -444,18 +483,18 @@ class CatalogIndex:
         """The passes `query` selects, by start time, one at a time."""
         columns = ", ".join(f"p.{name}" for name in _PASS_COLUMNS) + ", r.period_s, r.period_err_s, r.verdict"
         sql, params = self._select(query, columns)
-        with self._lock:
+        with self.guarded():
             cursor = self._db.execute(sql, params)
             rows = cursor.fetchmany(512)
         while rows:
             yield from map(_summary, rows)
-            with self._lock:
+            with self.guarded():
                 rows = cursor.fetchmany(512)
 
     def count(self, query: PassQuery) -> int:
         """How many passes `query` selects."""
         sql, params = self._select(query, "count(*)", order=False)
-        with self._lock:
+        with self.guarded():
             return int(self._db.execute(sql, params).fetchone()[0])
 
     def widths(self, query: PassQuery) -> dict[str, int]:
@@ -463,7 +502,7 @@ class CatalogIndex:
         sql, params = self._select(
             query, "max(length(p.pass_id)), max(length(p.name)), max(length(p.site)), max(length(p.band))", order=False
         )
-        with self._lock:
+        with self.guarded():
             row = self._db.execute(sql, params).fetchone()
         return dict(zip(("pass_id", "name", "site", "band"), (value or 0 for value in row)))
 
@@ -475,20 +514,15 @@ class CatalogIndex:
         )
         return self._select(query, columns)
 
-    @property
-    def connection(self) -> sqlite3.Connection:
-        """The SQLite connection (for pandas.read_sql_query)."""
-        return self._db
-
     def known_sha256(self) -> set[str]:
         """Content hashes of every stored file, passes and duplicate sources alike."""
-        with self._lock:
+        with self.guarded():
             rows = self._db.execute("SELECT source_sha256 FROM passes UNION SELECT sha256 FROM sources").fetchall()
         return {row[0] for row in rows}
 
     def results(self, pass_id: str) -> list[ResultSummary]:
         """The stored results of one pass."""
-        with self._lock:
+        with self.guarded():
             rows = self._db.execute(
                 "SELECT pass_id, kind, name, stored_utc, result_type, period_s, period_err_s, verdict "
                 "FROM results WHERE pass_id = ? ORDER BY kind, name",
@@ -498,7 +532,7 @@ class CatalogIndex:
 
     def duplicates(self, pass_id: str) -> list[DuplicateSource]:
         """Files recorded as duplicate sources of one pass."""
-        with self._lock:
+        with self.guarded():
             rows = self._db.execute(
                 "SELECT sha256, source_name, pass_id, ingested_utc, note FROM sources WHERE pass_id = ?", (pass_id,)
             ).fetchall()
@@ -507,7 +541,7 @@ class CatalogIndex:
     def damaged(self, norad: int | None = None) -> list[DamagedObject]:
         """Objects whose files could not be read when last looked at."""
         sql = "SELECT norad, error FROM objects WHERE status = 'damaged'"
-        with self._lock:
+        with self.guarded():
             rows = (
                 self._db.execute(sql + " AND norad = ?", (int(norad),)).fetchall()
                 if norad is not None
@@ -518,7 +552,7 @@ class CatalogIndex:
     def objects(self) -> list[tuple]:
         """Per object in the index: norad, name, cospar and its current passes' count, bands,
         first and last start (ns)."""
-        with self._lock:
+        with self.guarded():
             return self._db.execute(
                 "SELECT o.norad, o.name, o.cospar, count(p.pass_id), group_concat(DISTINCT p.band), "
                 "min(p.start_utc), max(p.start_utc), "

@@ -381,7 +381,8 @@ class Archive:
             periods_name=periods_name,
         )
         sql, params = self._index.frame_sql(query)
-        frame = pd.read_sql_query(sql, self._index.connection, params=params)
+        with self._index.guarded() as connection:
+            frame = pd.read_sql_query(sql, connection, params=params)
         for column in ("start_utc", "end_utc"):
             frame[column] = pd.to_datetime(frame[column], unit="ns")
         frame.insert(
