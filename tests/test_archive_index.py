@@ -6,6 +6,7 @@ Timing at survey scale is bench/archive_scale.py's job; here the answers are che
 from __future__ import annotations
 
 import json
+import shutil
 
 import numpy as np
 import pandas as pd
@@ -36,10 +37,11 @@ class Period:
         group.create_dataset("candidates", data=candidates)
 
 
-@pytest.fixture
-def survey(tmp_path, shared_data):
-    """The real files plus 40 synthetic passes of 8 objects, with stored period results."""
-    archive = Archive(tmp_path / "archive")
+@pytest.fixture(scope="module")
+def survey(tmp_path_factory, shared_data):
+    """The real files plus 40 synthetic passes of 8 objects, with stored period results (the
+    tests only read it)."""
+    archive = Archive(tmp_path_factory.mktemp("survey") / "archive")
     archive.ingest(REAL_FILES, progress=False, workers=0)
     rng = np.random.default_rng(3)
     start = np.datetime64("2025-02-01T18:00", "ns")
@@ -71,6 +73,8 @@ def test_survey_queries_select_by_period_verdict_band_and_time(survey):
     assert archive.summaries(period_min=10, periods_name="other") == []  # no such results
     with pytest.raises(ValueError, match=r"since='last tuesday' is not a UTC time"):
         archive.summaries(since="last tuesday")
+    with pytest.raises(ValueError, match=r"until='3000-01-01' is not a UTC time between 1678 and 2262"):
+        archive.summaries(until="3000-01-01")  # datetime64[ns] would wrap it to 1830
 
 
 def test_catalog_is_a_dataframe_of_every_pass(survey):
@@ -125,8 +129,11 @@ def test_show_prints_the_values_of_stored_results(survey, capsys):
     assert values["candidates"][1] == {"period_s": 10.0, "power": 0.5}
 
 
-def test_prefix_lookup_reads_only_the_object_it_names(survey, monkeypatch):
-    archive, _ = survey
+def test_prefix_lookup_reads_only_the_object_it_names(survey, monkeypatch, tmp_path):
+    source, _ = survey
+    shutil.copytree(source.path, tmp_path / "archive")
+    archive = Archive(tmp_path / "archive")
+    archive.summaries()  # the copy's files have new inodes: index them once
     opened = []
     real = Archive._read_index_entry
 

@@ -899,12 +899,14 @@ def _as_datetime(value, name: str) -> np.datetime64:
     """A UTC time from datetime64, ISO text or an astropy Time, as datetime64[ns]."""
     if hasattr(value, "datetime64"):  # astropy Time
         value = value.utc.datetime64
+    text = str(value).rstrip("Z") if isinstance(value, str) else value
     try:
-        result = np.datetime64(str(value).rstrip("Z") if isinstance(value, str) else value, "ns")
+        day = np.datetime64(text, "D")
+        result = np.datetime64(text, "ns")
     except (ValueError, TypeError):
         raise ValueError(f"{name}={value!r} is not a UTC time; give e.g. 2025-01-30 or 2025-01-30T17:00") from None
-    if np.isnat(result):
-        raise ValueError(f"{name}={value!r} is not a UTC time; give e.g. 2025-01-30 or 2025-01-30T17:00")
+    if np.isnat(result) or not np.datetime64("1678-01-01") <= day <= np.datetime64("2262-04-10"):
+        raise ValueError(f"{name}={value!r} is not a UTC time between 1678 and 2262; give e.g. 2025-01-30")
     return result
 
 
