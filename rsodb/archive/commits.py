@@ -225,8 +225,26 @@ class ObjectTransaction:
             file.close()
         return current.tmp
 
-    def stage(self, staged: Staged) -> None:
-        self.staged.append(staged)
+    def finish(
+        self,
+        norad: int,
+        current: Current,
+        build: Callable[[h5py.File], None],
+        names: tuple[str, str],
+        rows: list[PassSummary],
+        results: Iterable[ResultSummary] | None,
+        duplicates: list[DuplicateSource],
+        event: CommitEvent | None = None,
+    ) -> None:
+        """`write` the object's next file and stage it for `publish` with what the index records
+        of it: its name and COSPAR id, catalog rows, results (read once `build` has run; None:
+        unchanged) and duplicate sources."""
+        tmp = self.write(current, build)
+        state = ObjectState.of(norad, os.stat(tmp))
+        results = None if results is None else list(results)
+        self.staged.append(
+            Staged(norad, current.final, tmp, state, *names, rows, results, duplicates, current.before, event)
+        )
 
     def publish(self) -> list[Staged]:
         """Make every staged object durable and current, then record them in the index."""
@@ -268,10 +286,6 @@ def _copy(norad: int, final: Path, tmp: Path) -> ObjectState | None:
         with open(tmp, "wb") as target:
             shutil.copyfileobj(source, target, 1 << 20)
     return ObjectState.of(norad, stat)
-
-
-def _state(norad: int, tmp: Path) -> ObjectState:
-    return ObjectState.of(norad, os.stat(tmp))
 
 
 def _table_bytes(file: h5py.File, name: str) -> int:
@@ -376,23 +390,8 @@ def stage_files(transaction: ObjectTransaction, norad: int, files: Sequence[Pend
             if value and attr_text(current.attrs.get(key, "")) != value:
                 file.attrs[key] = value
 
-    tmp = transaction.write(current, build)
     results = current._results if current.before is not None else []  # None: unchanged, not read
-    transaction.stage(
-        Staged(
-            norad,
-            current.final,
-            tmp,
-            _state(norad, tmp),
-            name,
-            cospar,
-            rows,
-            results,
-            duplicates,
-            current.before,
-            event,
-        )
-    )
+    transaction.finish(norad, current, build, (name, cospar), rows, results, duplicates, event)
     return event
 
 
@@ -430,22 +429,9 @@ def stage_results(transaction: ObjectTransaction, norad: int, entries: Iterable[
         layout.write_results(file, sorted(results.values(), key=lambda item: (item.pass_id, item.kind, item.name)))
         file.attrs["freed_bytes"] = freed
 
-    tmp = transaction.write(current, build)
-    name, cospar = _object_names(current, [])
-    transaction.stage(
-        Staged(
-            norad,
-            current.final,
-            tmp,
-            _state(norad, tmp),
-            name,
-            cospar,
-            current.rows,
-            list(results.values()),
-            current.duplicates,
-            current.before,
-        )
-    )
+    names = _object_names(current, [])
+    # The view is read after `build` has stored the results.
+    transaction.finish(norad, current, build, names, current.rows, results.values(), current.duplicates)
 
 
 # -- metadata of stored passes ----------------------------------------------------------------
@@ -479,13 +465,7 @@ def stage_metadata(
         file.attrs["freed_bytes"] = int(file.attrs.get("freed_bytes", 0)) + _table_bytes(file, "catalog")
         layout.write_catalog(file, rows)
 
-    tmp = transaction.write(current, build)
-    name, cospar = _object_names(current, [])
-    transaction.stage(
-        Staged(
-            norad, current.final, tmp, _state(norad, tmp), name, cospar, rows, None, current.duplicates, current.before
-        )
-    )
+    transaction.finish(norad, current, build, _object_names(current, []), rows, None, current.duplicates)
     return sorted(updated)
 
 

@@ -38,6 +38,7 @@ _RESULT_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+=-]*$")
 _TEMP_NAME = re.compile(r"^\.(\d+)\.h5\..*\.tmp$")
 _OBJECT_NAME = re.compile(r"^(\d+)\.h5$")
 _NORAD_PREFIX = re.compile(r"^(\d+)-")
+_FILTERS = {"all_versions", "since", "until", "period_min", "period_max", "verdict", "periods_name"}
 # Objects read into the index per transaction while it is rebuilt.
 _INDEX_BATCH = 256
 
@@ -235,6 +236,9 @@ class Archive:
 
     # -- reading -----------------------------------------------------------------------------
     def _query(self, norad=None, band=None, site=None, **filters) -> PassQuery:
+        unknown = sorted(set(filters) - _FILTERS)
+        if unknown:
+            raise TypeError(f"{unknown[0]!r} is not a filter; the filters are {', '.join(sorted(_FILTERS))}")
         if norad is not None and (isinstance(norad, bool) or not isinstance(norad, (int, np.integer))):
             raise TypeError(f"norad={norad!r} must be an integer NORAD catalogue number")
         for key in ("since", "until"):
@@ -253,51 +257,8 @@ class Archive:
         self._refresh(None if norad is None else [norad])
         return query
 
-    def iter_summaries(
-        self,
-        norad: int | None = None,
-        band: str | None = None,
-        site: str | None = None,
-        *,
-        all_versions: bool = False,
-        since=None,
-        until=None,
-        period_min: float | None = None,
-        period_max: float | None = None,
-        verdict: str | None = None,
-        periods_name: str = "default",
-    ) -> Iterator[PassSummary]:
-        """The passes selected, by start time, one at a time (what ``rsodb ls`` streams).
-
-        Parameters are those of `summaries`.
-        """
-        query = self._query(
-            norad,
-            band,
-            site,
-            all_versions=all_versions,
-            since=since,
-            until=until,
-            period_min=period_min,
-            period_max=period_max,
-            verdict=verdict,
-            periods_name=periods_name,
-        )
-        return self._index.passes(query)
-
     def summaries(
-        self,
-        norad: int | None = None,
-        band: str | None = None,
-        site: str | None = None,
-        *,
-        all_versions: bool = False,
-        since=None,
-        until=None,
-        period_min: float | None = None,
-        period_max: float | None = None,
-        verdict: str | None = None,
-        periods_name: str = "default",
+        self, norad: int | None = None, band: str | None = None, site: str | None = None, **filters
     ) -> list[PassSummary]:
         """One `PassSummary` per pass, sorted by start time, without reading any arrays.
 
@@ -318,37 +279,22 @@ class Archive:
         verdict : str, optional
             Only passes whose stored period result has this verdict (e.g. ``"confident"``).
         periods_name : str
-            The stored period result the period filters and columns use.
-        """
-        return list(
-            self.iter_summaries(
-                norad,
-                band,
-                site,
-                all_versions=all_versions,
-                since=since,
-                until=until,
-                period_min=period_min,
-                period_max=period_max,
-                verdict=verdict,
-                periods_name=periods_name,
-            )
-        )
+            The stored period result the period filters and columns use (default "default").
 
-    def catalog(
-        self,
-        norad: int | None = None,
-        band: str | None = None,
-        site: str | None = None,
-        *,
-        all_versions: bool = False,
-        since=None,
-        until=None,
-        period_min: float | None = None,
-        period_max: float | None = None,
-        verdict: str | None = None,
-        periods_name: str = "default",
-    ):
+        Raises
+        ------
+        TypeError
+            For a filter not listed here.
+        """
+        return list(self.iter_summaries(norad, band, site, **filters))
+
+    def iter_summaries(
+        self, norad: int | None = None, band: str | None = None, site: str | None = None, **filters
+    ) -> Iterator[PassSummary]:
+        """The passes `summaries` selects, one at a time (what ``rsodb ls`` streams)."""
+        return self._index.passes(self._query(norad, band, site, **filters))
+
+    def catalog(self, norad: int | None = None, band: str | None = None, site: str | None = None, **filters):
         """Every pass selected as a pandas DataFrame, one row per pass, by start time.
 
         Columns: ``pass_id``, ``lineage_id``, ``version``, ``supersedes``, ``superseded_by``,
@@ -356,7 +302,7 @@ class Archive:
         UTC), ``duration_s``, ``n_points``, ``exposure_s``, ``source_name``, ``source_sha256``,
         ``source_format``, ``ingested_utc``, ``n_row_problems``, ``n_warnings``, ``elements``
         ("header", "catalogue" or ""), and from the stored period result `periods_name`:
-        ``period_s``, ``period_err_s``, ``verdict`` (NaN / None without one). Parameters are
+        ``period_s``, ``period_err_s``, ``verdict`` (NaN / None without one). The filters are
         those of `summaries`; the query runs on the catalog index, so it costs what its result
         costs, not what the archive holds.
 
@@ -368,19 +314,7 @@ class Archive:
         # pandas costs about half a second to import; only this conversion needs it.
         import pandas as pd
 
-        query = self._query(
-            norad,
-            band,
-            site,
-            all_versions=all_versions,
-            since=since,
-            until=until,
-            period_min=period_min,
-            period_max=period_max,
-            verdict=verdict,
-            periods_name=periods_name,
-        )
-        sql, params = self._index.frame_sql(query)
+        sql, params = self._index.frame_sql(self._query(norad, band, site, **filters))
         with self._index.guarded() as connection:
             frame = pd.read_sql_query(sql, connection, params=params)
         for column in ("start_utc", "end_utc"):

@@ -9,9 +9,19 @@ import argparse
 import os
 import sys
 
+import ingest
 import rsodb
 
-__all__ = ["add_archive_option", "open_archive", "archive_location", "fail", "ARCHIVE_ENV", "DEFAULT_ARCHIVE"]
+__all__ = [
+    "add_archive_option",
+    "add_max_age_option",
+    "max_age_days",
+    "open_archive",
+    "archive_location",
+    "fail",
+    "ARCHIVE_ENV",
+    "DEFAULT_ARCHIVE",
+]
 
 ARCHIVE_ENV = "RSODB_ARCHIVE"
 DEFAULT_ARCHIVE = "archive"
@@ -26,6 +36,22 @@ def add_archive_option(parser: argparse.ArgumentParser) -> None:
         help=f"archive directory (default: ${ARCHIVE_ENV} if set, else ./{DEFAULT_ARCHIVE}; "
         "created by 'rsodb ingest' when missing)",
     )
+
+
+def add_max_age_option(parser: argparse.ArgumentParser) -> None:
+    """Add ``--max-age-days D``: the oldest element set a catalogue may give a pass."""
+    parser.add_argument(
+        "--max-age-days",
+        type=float,
+        default=None,
+        metavar="D",
+        help="oldest element set given to a pass, days between its epoch and the pass (default: 30)",
+    )
+
+
+def max_age_days(args: argparse.Namespace) -> float:
+    """``--max-age-days``, or the library's default (`ingest.elements.DEFAULT_MAX_AGE_DAYS`)."""
+    return ingest.DEFAULT_MAX_AGE_DAYS if args.max_age_days is None else args.max_age_days
 
 
 def archive_location(args: argparse.Namespace) -> tuple[str, str]:

@@ -6,7 +6,7 @@ import argparse
 import json
 
 import ingest
-from rsodb.cli.archive_options import add_archive_option, fail, open_archive
+from rsodb.cli.archive_options import add_archive_option, add_max_age_option, fail, max_age_days, open_archive
 
 __all__ = ["register", "run_add"]
 
@@ -43,13 +43,7 @@ def register(subparsers) -> None:
     add.add_argument("catalogue", metavar="FILE", help="TLE file or OMM JSON")
     add_archive_option(add)
     add.add_argument("--norad", type=int, help="only this object")
-    add.add_argument(
-        "--max-age-days",
-        type=float,
-        default=None,
-        metavar="D",
-        help="oldest set given, days between its epoch and the pass (default: 30)",
-    )
+    add_max_age_option(add)
     add.add_argument("--replace", action="store_true", help="also replace elements an earlier catalogue gave")
     add.add_argument("--json", action="store_true", help="print the report as JSON")
     add.set_defaults(func=run_add)
@@ -62,7 +56,7 @@ def run_add(args: argparse.Namespace) -> int:
         archive = open_archive(args)
         report = archive.add_elements(
             catalogue,
-            max_age_days=ingest.DEFAULT_MAX_AGE_DAYS if args.max_age_days is None else args.max_age_days,
+            max_age_days=max_age_days(args),
             norad=args.norad,
             replace_catalogue=args.replace,
         )

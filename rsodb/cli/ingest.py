@@ -8,7 +8,7 @@ import sys
 
 import ingest
 import rsodb
-from rsodb.cli.archive_options import add_archive_option, fail, open_archive
+from rsodb.cli.archive_options import add_archive_option, add_max_age_option, fail, max_age_days, open_archive
 
 __all__ = ["register", "run"]
 
@@ -47,13 +47,7 @@ def register(subparsers) -> None:
         metavar="FILE",
         help="TLE file or OMM JSON: orbital elements for passes whose files carry none",
     )
-    parser.add_argument(
-        "--max-age-days",
-        type=float,
-        default=None,
-        metavar="D",
-        help="oldest element set given to a pass, days between its epoch and the pass (default: 30)",
-    )
+    add_max_age_option(parser)
     parser.add_argument(
         "--workers",
         type=int,
@@ -76,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
             progress=not args.no_progress,
             workers=workers,
             elements=catalogue,
-            max_age_days=ingest.DEFAULT_MAX_AGE_DAYS if args.max_age_days is None else args.max_age_days,
+            max_age_days=max_age_days(args),
         )
     except (ValueError, OSError, TimeoutError) as error:
         return fail("ingest", error)
