@@ -165,7 +165,7 @@ def time_order_reasons(stamps_ns: np.ndarray, keep: np.ndarray, lines: np.ndarra
         where = "the previous kept row" if other == before else "the next kept row"
         reasons.append(
             f"time {labels[i]} {word} {where}'s {labels[other]} (line {int(lines[other])}): "
-            "the frame's time stamp is wrong, so the row is set aside"
+            "the frame's time stamp is wrong"
         )
     return reasons
 

@@ -158,7 +158,7 @@ def test_times_out_of_order(tmp_path, lines):
     lines[FIRST_ROW + 2], lines[FIRST_ROW + 3] = lines[FIRST_ROW + 3], lines[FIRST_ROW + 2]
     assert set_aside(write(tmp_path, lines)) == (
         ":21: time 2025-01-30 17:36:51.108 is earlier than the previous kept row's 2025-01-30 17:36:51.208 "
-        "(line 20): the frame's time stamp is wrong, so the row is set aside"
+        "(line 20): the frame's time stamp is wrong"
     )
 
 
@@ -166,7 +166,7 @@ def test_duplicate_time(tmp_path, lines):
     lines.insert(FIRST_ROW + 1, lines[FIRST_ROW])
     assert set_aside(write(tmp_path, lines), N_ROWS + 1) == (
         ":19: time 2025-01-30 17:36:50.907 repeats the previous kept row's 2025-01-30 17:36:50.907 (line 18): "
-        "the frame's time stamp is wrong, so the row is set aside"
+        "the frame's time stamp is wrong"
     )
 
 
@@ -225,7 +225,7 @@ def test_julian_dates_out_of_order(tmp_path, shared_data):
     lines[19], lines[20] = lines[20], lines[19]
     assert set_aside(write(tmp_path, lines)) == (
         ":21: time 2460746.23009745 is earlier than the previous kept row's 2460746.2300986084 (line 20): "
-        "the frame's time stamp is wrong, so the row is set aside"
+        "the frame's time stamp is wrong"
     )
 
 
@@ -454,7 +454,7 @@ def test_phc_time_going_backwards(tmp_path, phc_lines):
     phc_lines[10] = phc_lines[10].replace("17:19:44", "17:19:42")
     assert set_aside(write(tmp_path, phc_lines, "b.phc"), PHC_ROWS) == (
         ":11: time 17:19:42.000000 is earlier than the previous kept row's 17:19:43.000000 (line 10): "
-        "the frame's time stamp is wrong, so the row is set aside"
+        "the frame's time stamp is wrong"
     )
     # A step back by more than 12 h but less than 23 h is a glitch, not a midnight rollover that
     # would move every later row to the next day.
