@@ -62,6 +62,7 @@ CREATE TABLE IF NOT EXISTS results (
 );
 CREATE INDEX IF NOT EXISTS results_norad ON results (norad);
 CREATE INDEX IF NOT EXISTS results_period ON results (kind, name, period_s);
+CREATE INDEX IF NOT EXISTS results_verdict ON results (kind, name, verdict, period_s);
 CREATE TABLE IF NOT EXISTS sources (
     sha256 TEXT NOT NULL, norad INTEGER NOT NULL, source_name TEXT, pass_id TEXT,
     ingested_utc TEXT, note TEXT
@@ -70,6 +71,7 @@ CREATE INDEX IF NOT EXISTS sources_sha ON sources (sha256);
 CREATE INDEX IF NOT EXISTS sources_norad ON sources (norad);
 """
 
+_N_INDEXES = _SCHEMA.count("CREATE INDEX")
 _PASS_COLUMNS = (
     "pass_id",
     "lineage_id",
@@ -309,6 +311,8 @@ class CatalogIndex:
                 db.executescript(_SCHEMA)
                 db.executescript("DELETE FROM objects; DELETE FROM passes; DELETE FROM results; DELETE FROM sources;")
                 db.execute("INSERT OR REPLACE INTO meta VALUES ('version', ?)", (str(INDEX_VERSION),))
+            elif db.execute("SELECT count(*) FROM sqlite_master WHERE type = 'index'").fetchone()[0] < _N_INDEXES:
+                db.executescript(_SCHEMA)  # indexes added since the file was made
         except sqlite3.DatabaseError:
             db.close()
             raise
@@ -472,8 +476,11 @@ class CatalogIndex:
     # -- queries --------------------------------------------------------------------------------
     def _select(self, query: PassQuery, columns: str, order: bool = True) -> tuple[str, list]:
         where, params = query.where()
+        # With a period or verdict filter only passes with a result qualify: an inner join lets
+        # SQLite start from the results' (kind, name, verdict, period) index instead of every pass.
+        filtered = query.period_min_s is not None or query.period_max_s is not None or query.verdict is not None
         sql = (
-            f"SELECT {columns} FROM passes p LEFT JOIN results r "
+            f"SELECT {columns} FROM passes p {'JOIN' if filtered else 'LEFT JOIN'} results r "
             "ON r.pass_id = p.pass_id AND r.kind = 'periods' AND r.name = ? "
             f"WHERE {where}" + (" ORDER BY p.start_utc, p.pass_id" if order else "")
         )
