@@ -12,6 +12,7 @@ import pytest
 
 import ingest
 from rsodb.archive import Archive, layout
+from rsodb.cli import main
 from tests.conftest import COSMOS2540_PHV, COSMOS2553_PHC, PROJECT_ROOT
 
 B_ID, V_ID = "51511-20250130T171941-B-uzhhorod", "51511-20250130T171941-V-uzhhorod"
@@ -97,3 +98,16 @@ def test_pass_ids_are_exact_to_the_second_of_the_first_sample(tmp_path):
     (observed,) = ingest.read_file(path)
     assert observed.start_utc < np.datetime64("2021-06-26T01:07:14", "ns")
     assert layout.natural_pass_id(observed) == "22076-20210626T010714-R-derenivka"
+
+
+def test_ls_and_show_print_the_start_second_of_the_id(tmp_path, capsys):
+    # issue 19: the id said T010714 while ls printed 01:07:13 and show 01:07:13.999.
+    path = PROJECT_ROOT / "data_samples" / "result_22076_20210626_UT010714.phR"
+    archive = str(tmp_path / "archive")
+    assert main(["ingest", str(path), "--archive", archive, "--no-progress"]) == 0
+    capsys.readouterr()
+    assert main(["ls", "--archive", archive]) == 0
+    row = capsys.readouterr().out.splitlines()[1]
+    assert row.startswith("22076-20210626T010714-R-derenivka") and "2021-06-26 01:07:14" in row
+    assert main(["show", "22076-20210626T010714", "--archive", archive]) == 0
+    assert "time       2021-06-26T01:07:14.000Z .. 2021-06-26T01:09:13.750Z" in capsys.readouterr().out

@@ -44,7 +44,7 @@ from ingest.observation import ARRAY_FIELDS, Pass
 from ingest.problems import FileWarning, RowProblem
 from ingest.reduction import Reduction
 from ingest.site import Site
-from rsodb.archive.stored import DuplicateSource, PassSummary, ResultSummary, StoredPass
+from rsodb.archive.stored import DuplicateSource, PassSummary, ResultSummary, StoredPass, utc_text
 from rsodb.storage import attr_text, to_json
 
 __all__ = [
@@ -203,8 +203,7 @@ def natural_pass_id(pass_: Pass) -> str:
     a Julian date printed as a float64 holds 01:07:14.000 as 01:07:13.9999952, which is the same
     instant as far as any file can say (ccd_phot writes milliseconds), not the second before.
     """
-    start_ms = np.datetime64(pass_.start_utc, "ns") + np.timedelta64(500_000, "ns")
-    start = np.datetime_as_string(start_ms.astype("datetime64[ms]"), unit="s").replace("-", "").replace(":", "")
+    start = utc_text(pass_.start_utc, "s").replace("-", "").replace(":", "")
     return f"{pass_.norad}-{start}-{band_key(pass_.band)}-{pass_.site.key}"
 
 

@@ -8,7 +8,15 @@ import numpy as np
 
 from ingest.observation import Pass
 
-__all__ = ["StoredPass", "PassSummary", "ArchivedObject", "ResultSummary", "DuplicateSource", "DamagedObject"]
+__all__ = [
+    "utc_text",
+    "StoredPass",
+    "PassSummary",
+    "ArchivedObject",
+    "ResultSummary",
+    "DuplicateSource",
+    "DamagedObject",
+]
 
 
 @dataclass(frozen=True, eq=False)
@@ -250,5 +258,19 @@ class ArchivedObject:
     last_utc: np.datetime64
 
 
+def utc_text(t: np.datetime64, unit: str = "ms") -> str:
+    """ISO text of a UTC time, rounded to the millisecond first and then cut to `unit`.
+
+    The rounding is that of pass ids (`rsodb.archive.layout.natural_pass_id`): a Julian date
+    stored as a float64 holds 01:07:14.000 as 01:07:13.9999952, which every display shows as
+    01:07:14, never as the second before.
+
+    >>> utc_text(np.datetime64("2021-06-26T01:07:13.9999952"), "s")
+    '2021-06-26T01:07:14'
+    """
+    rounded = (np.datetime64(t, "ns") + np.timedelta64(500_000, "ns")).astype("datetime64[ms]")
+    return np.datetime_as_string(rounded, unit=unit)
+
+
 def _iso(t: np.datetime64) -> str:
-    return np.datetime_as_string(t, unit="ms") + "Z"
+    return utc_text(t) + "Z"

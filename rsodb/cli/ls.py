@@ -7,6 +7,7 @@ import itertools
 import json
 import sys
 
+from rsodb.archive.stored import utc_text
 from rsodb.cli.archive_options import add_archive_option, fail, open_archive
 
 __all__ = ["register", "run", "format_row", "COLUMNS"]
@@ -63,7 +64,7 @@ def register(subparsers) -> None:
 
 
 def _cells(row, with_periods: bool) -> tuple[str, ...]:
-    start = str(row.start_utc.astype("datetime64[s]")).replace("T", " ")
+    start = utc_text(row.start_utc, "s").replace("T", " ")
     cells = (
         row.pass_id,
         str(row.norad),

@@ -9,6 +9,7 @@ import math
 import numpy as np
 
 import rsodb
+from rsodb.archive.stored import utc_text
 from rsodb.cli.archive_options import add_archive_option, fail, open_archive
 
 __all__ = ["register", "run", "describe"]
@@ -48,7 +49,7 @@ def register(subparsers) -> None:
 
 
 def _iso(t: np.datetime64) -> str:
-    return np.datetime_as_string(t, unit="ms") + "Z"
+    return utc_text(t) + "Z"
 
 
 def describe(stored, results: dict[str, dict[str, dict]], duplicates=()) -> dict:
