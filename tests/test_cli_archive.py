@@ -206,6 +206,11 @@ def test_default_archive_from_the_environment_or_the_directory(archive_dir, tmp_
     assert main(["ls"]) == 2
     err = capsys.readouterr().err
     assert "no archive at 'archive'" in err and "comes from the default; give --archive DIR or set RSODB_ARCHIVE" in err
+    # The report commands take the same default (no period results stored yet: a clear error).
+    monkeypatch.chdir(tmp_path)
+    assert main(["report", "periods", "--object", "44517", "--out", "r.html"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("rsodb report periods: error:") and "rsodb periods" in err
 
 
 def test_export_eossa_reads_back(archive_dir, tmp_path, monkeypatch, capsys):

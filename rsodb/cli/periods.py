@@ -60,6 +60,10 @@ def _row(result) -> str:
     return f"{result.pass_id:40s} {period:>22s}  {result.verdict:18s}{sidereal}"
 
 
+# Above the rows of _row: the search gives the synodic period; the sidereal one lies in a range.
+HEADER = f"{'PASS ID':40s} {'SYNODIC S +- ERR':>22s}  {'VERDICT':18s}  SIDEREAL RANGE S"
+
+
 def run(args: argparse.Namespace) -> int:
     try:
         archive = open_archive(args)
@@ -86,6 +90,8 @@ def run(args: argparse.Namespace) -> int:
     else:
         if not survey.results and not survey.failures:
             print(f"no passes in {args.archive}" + (f" for object {args.object}" if args.object else ""))
+        if survey.results:
+            print(HEADER.rstrip())
         for result in survey.results:
             print(_row(result))
         for pass_id, error in survey.failures:
