@@ -10,12 +10,13 @@ import pytest
 
 from ingest import read_file
 from rsodb.archive import Archive
-from rsodb.campaign.fit_campaign import run_campaign, run_campaigns
+from rsodb.campaign.fit_campaign import NO_ORBIT, run_campaign, run_campaigns
 from rsodb.cli import main
 from rsodb.fit.config import FitConfig
 from rsodb.fit.coverage import inject, window
 from rsodb.fit.runner import FitProblem
-from tests.conftest import TOPEX_PHV
+from rsodb.report.index_page import build_index
+from tests.conftest import COSMOS2553_PHC, TOPEX_PHV
 
 TRUTH = {
     "spin_period_s": 9.86,
@@ -110,3 +111,17 @@ def test_campaign_needs_a_selection(archive, capsys):
         run_campaign(archive, config=FitConfig.from_dict(FIT), progress=False)
     assert main(["campaign", "--archive", str(archive.path), "--passes", "99999-nope"]) == 2
     assert "rsodb campaign: error:" in capsys.readouterr().err
+
+
+def test_passes_without_orbital_elements_are_named_not_sent_to_dask(tmp_path):
+    # issue 19: the main job printed Dask's "Compute Failed" tracebacks for the .phc passes,
+    # which carry no elements, and its index showed "-" for them with no reason.
+    archive = Archive(tmp_path / "archive")
+    archive.ingest([COSMOS2553_PHC], progress=False)
+    ids = [row.pass_id for row in archive.summaries(51511)]
+    (outcome,) = run_campaigns(archive, [(FitConfig.from_dict(FIT), ids)], progress=False)
+    assert outcome.scheduler == "nothing to run"  # no cluster was started
+    assert outcome.failed == tuple((pass_id, NO_ORBIT) for pass_id in ids) and outcome.fitted == ()
+    missing = {pass_id: ("fits", error) for pass_id, error in outcome.failed}
+    page = build_index(archive, [], "camp", missing).to_html()
+    assert page.count("not fitted: no orbital elements") == 2 and "rsodb elements add" in page

@@ -114,7 +114,11 @@ def test_show_text_json_and_plot(archive_dir, tmp_path, capsys):
     info = json.loads(capsys.readouterr().out)
     assert (info["n_points"], info["n_valid"], info["exposure_s"], info["band"]) == (692, 692, 1.0, "V")
     assert info["site"]["name"] == "Uzhhorod" and info["results"] == {"periods": {}, "fits": {}}
-    assert info["elements_source"] is None and info["rows_set_aside"] == [] and info["warnings"] == []
+    assert info["elements_source"] is None and info["rows_set_aside"] == []
+    # The .phc file carries no elements and none were given: said with the pass, with the fix.
+    (warning,) = info["warnings"]
+    assert warning["reason"].startswith("no orbit: the file carries no orbital elements")
+    assert "rsodb elements add FILE" in warning["reason"]
     assert plot.stat().st_size > 10_000 and plot.read_bytes()[:4] == b"\x89PNG"
 
     assert main(["show", "51511", "--archive", str(archive_dir)]) == 2
@@ -162,7 +166,7 @@ def test_export_csv_round_trip(archive_dir, tmp_path, capsys):
     assert main(["export", "22076", "--archive", str(archive_dir), "--format", "csv", "--out", str(out)]) == 2
     assert "exists; choose another --out or add --force" in capsys.readouterr().err
 
-    assert main(["export", "44517", "--archive", str(archive_dir), "--format", "csv"]) == 0
+    assert main(["export", "44517", "--archive", str(archive_dir)]) == 0  # CSV by default
     stdout = capsys.readouterr().out
     assert len(pd.read_csv(io.StringIO(stdout), comment="#")) == 2535
 

@@ -96,6 +96,14 @@ def read_observation_file(path: str, known_sha256: frozenset[str] = frozenset())
     return path, sha or passes[0].source_sha256, passes, None
 
 
+# The warning stored with a pass whose file carries no orbital elements when no catalogue is given
+# (the photometer's .phc files); 'rsodb elements add' removes it with the other "no orbit:" notes.
+NO_ELEMENTS = (
+    "no orbit: the file carries no orbital elements, so the pass has no geometry (sidereal period, "
+    "render, fit); give them with 'rsodb ingest --tle FILE' or 'rsodb elements add FILE'"
+)
+
+
 def _read_chunk(paths: list[str]):
     return [read_observation_file(path, _known_sha256) for path in paths]
 
@@ -108,8 +116,10 @@ def _auto_workers(n_files: int) -> int:
 
 def with_elements(pass_: Pass, catalogue: ElementCatalogue | None, max_age_days: float) -> tuple[Pass, str]:
     """The pass with the catalogue's elements when its file carries none; and why not, if not."""
-    if catalogue is None or pass_.tle is not None or pass_.omm is not None:
+    if pass_.tle is not None or pass_.omm is not None:
         return pass_, ""
+    if catalogue is None:
+        return pass_, NO_ELEMENTS
     chosen, reason = catalogue.elements_for(pass_.norad, pass_.start_utc, max_age_days)
     if chosen is None:
         return pass_, f"no orbit: {reason}"

@@ -1,4 +1,4 @@
-"""``rsodb export PASS --archive DIR --format csv|eossa``: a pass as CSV or EOSSA FITS."""
+"""``rsodb export PASS --archive DIR [--format csv|eossa]``: a pass as CSV or EOSSA FITS."""
 
 from __future__ import annotations
 
@@ -39,7 +39,7 @@ def register(subparsers) -> None:
     )
     parser.add_argument("pass_id", metavar="PASS", help="pass id (or a unique prefix)")
     add_archive_option(parser)
-    parser.add_argument("--format", required=True, choices=FORMATS, help="output format")
+    parser.add_argument("--format", default="csv", choices=FORMATS, help="output format (default: %(default)s)")
     parser.add_argument("--out", metavar="FILE", help="output file (csv: default standard output)")
     parser.add_argument("--force", action="store_true", help="overwrite an existing output file")
     parser.set_defaults(func=run)
