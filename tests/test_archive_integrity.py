@@ -165,6 +165,14 @@ def test_period_search_of_other_objects_goes_on(real_archive, capsys):
     )
     assert status == 0
     assert "51511-20250130T171941-B-uzhhorod" in capsys.readouterr().out
+    # Over every object: the others are searched, the damaged one named on stderr (exit status 1).
+    status = main(
+        ["periods", "--archive", str(real_archive.path), "--band", "B", "--quiet"]
+        + ["--processes", "1", "--no-geometry", "--no-store"]
+    )
+    captured = capsys.readouterr()
+    assert status == 1 and "51511-20250130T171941-B-uzhhorod" in captured.out
+    assert f"rsodb periods: warning: {real_archive.object_path(44517)} is damaged" in captured.err
 
 
 def test_the_index_is_rebuilt_when_missing_damaged_or_stale(real_archive, shared_data):
