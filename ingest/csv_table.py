@@ -5,7 +5,7 @@ Layout (docs/formats.md, "CSV light curves")::
     # rsodb light curve CSV                         optional first line
     # object = 22076                                required: NORAD number
     # band = V                                      required
-    # exposure_s = 0.2                              required, seconds
+    # exposure_s = 0.2                              required, seconds (or 'exposure')
     # site = Derenivka                              required: a known site, or a name with
     # site_lat_deg = 48.5635505                       site_lat_deg, site_lon_deg and
     # site_lon_deg = 22.453751                        site_elevation_m
@@ -186,7 +186,12 @@ def _header(text: TextFile) -> tuple[dict, int]:
             return keys, number
         key, sep, value = line.lstrip("#").partition("=")
         if sep:
-            keys[key.strip().lower()] = (value.strip(), number)
+            key = key.strip().lower()
+            if key in _KEY_ALIASES:
+                key = _KEY_ALIASES[key]
+                if key in keys:
+                    continue  # rsodb's own key, given too, wins
+            keys[key] = (value.strip(), number)
     raise text.error(None, "no column line (e.g. 'time_utc,mag,mag_err') after the '#' header lines")
 
 
@@ -205,7 +210,7 @@ def _columns(text: TextFile, line: int) -> tuple[Column, ...]:
         raise text.error(line, f"the columns name {repeated[0]!r} twice; keep one of them")
     missing = [field for field in ("time" if "jd" not in fields else "jd", *_REQUIRED) if field not in fields]
     if missing:
-        what = "a time column (time_utc or jd)" if missing[0] in ("time", "jd") else f"a {missing[0]} column"
+        what = "time column (time_utc, time or jd)" if missing[0] in ("time", "jd") else f"{missing[0]} column"
         raise text.error(line, f"the CSV has no {what}; the column line must name time_utc, mag and mag_err")
     return tuple(
         Column(CSV_COLUMNS[name][0], name, CSV_COLUMNS[name][1], 40, finite=CSV_COLUMNS[name][0] in _FINITE)
@@ -213,9 +218,17 @@ def _columns(text: TextFile, line: int) -> tuple[Column, ...]:
     )
 
 
+# What a missing header line could read, for the error that asks for it.
+_EXAMPLES = {"band": "V", "exposure_s": "0.1", "site": "Derenivka"}
+# Header keys other tools write, read as rsodb's: the exposure in seconds.
+_KEY_ALIASES = {"exposure": "exposure_s"}
+
+
 def _required(text: TextFile, keys: dict, key: str, column_line: int) -> str:
     if key not in keys or not keys[key][0]:
-        raise text.error(column_line, f"the header has no '# {key} = ' line; add it (e.g. '# {key} = V')")
+        raise text.error(
+            column_line, f"the header has no '# {key} = ' line; add it (e.g. '# {key} = {_EXAMPLES.get(key, '...')}')"
+        )
     return keys[key][0]
 
 

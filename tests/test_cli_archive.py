@@ -198,6 +198,29 @@ def test_ingest_of_a_generic_csv(tmp_path, shared_data, capsys):
     assert "column 'mag_err_v' is not one rsodb reads" in capsys.readouterr().out
 
 
+def test_a_generic_csv_with_other_tools_names(tmp_path, capsys):
+    # issue 19: "a generic CSV of time, mag, mag_err with a small header of object, site, band,
+    # exposure": the column 'time' and the header key 'exposure' (seconds) are read as rsodb's.
+    path = tmp_path / "generic.csv"
+    header = "# object = 44517\n# site = Derenivka\n# band = V\n# exposure = 0.1\n"
+    rows = "".join(f"2025-02-01 17:00:0{k}.5,{6.5 + 0.01 * k:.2f},0.01\n" for k in range(5))
+    path.write_text(header + "time,mag,mag_err\n" + rows)
+    archive = str(tmp_path / "archive")
+    assert main(["ingest", str(path), "--archive", archive, "--no-progress", "--json"]) == 0
+    (item,) = json.loads(capsys.readouterr().out)["ingested"]
+    assert item["pass_ids"] == ["44517-20250201T170000-V-derenivka"]
+    assert main(["show", "44517", "--archive", archive, "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert (info["exposure_s"], info["n_points"], info["mag_max"]) == (0.1, 5, 6.54)
+    # What is missing is named with an example of its own kind.
+    path.write_text(header.replace("# exposure = 0.1\n", "") + "time,mag\n" + rows)
+    assert main(["ingest", str(path), "--archive", archive, "--no-progress"]) == 1
+    assert f"{path}:4: the CSV has no mag_err column" in capsys.readouterr().out
+    path.write_text(header.replace("# exposure = 0.1\n", "") + "time,mag,mag_err\n" + rows)
+    assert main(["ingest", str(path), "--archive", archive, "--no-progress"]) == 1
+    assert "no '# exposure_s = ' line; add it (e.g. '# exposure_s = 0.1')" in capsys.readouterr().out
+
+
 def test_default_archive_from_the_environment_or_the_directory(archive_dir, tmp_path, monkeypatch, capsys):
     monkeypatch.setenv("RSODB_ARCHIVE", str(archive_dir))
     assert main(["ls", "--json"]) == 0
