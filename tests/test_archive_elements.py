@@ -92,6 +92,8 @@ def test_the_real_phc_pass_gets_an_orbit_within_the_stated_age(tmp_path, cosmos2
     assert (
         "orbit      none: no geometry, render or fit; add one with 'rsodb elements add FILE'" in capsys.readouterr().out
     )
+    with pytest.raises(ValueError, match=f"pass '{B_ID}' carries no orbital elements .* 'rsodb elements add TLE_FILE'"):
+        PassGeometry.from_pass(stored)  # what render and fit say: the command that gives it one
 
     # rsodb elements add, with the age stated, for the stored passes.
     assert main(["elements", "add", str(cosmos2553_catalogue), "--archive", str(archive), "--max-age-days", "45"]) == 0
