@@ -8,6 +8,8 @@ import os
 from pathlib import Path
 import re
 import shutil
+import subprocess
+import sys
 
 import numpy as np
 import pandas as pd
@@ -15,7 +17,7 @@ import pytest
 
 import ingest
 from rsodb.cli import main
-from tests.conftest import COSMOS2540_PHV, COSMOS2553_PHC, REAL_FILES, TOPEX_PHV
+from tests.conftest import COSMOS2540_PHV, COSMOS2553_PHC, PROJECT_ROOT, REAL_FILES, TOPEX_PHV
 
 TOPEX_ID = "22076-20240730T212240-V-derenivka"
 
@@ -345,3 +347,14 @@ def test_ingest_of_a_directory_without_observations_says_so(tmp_path, capsys):
     assert capsys.readouterr().out.strip() == (
         "no observation files found (directories are searched for *.ph<letter> files; name other files explicitly)"
     )
+
+
+def test_the_command_line_parser_loads_no_archive_code():
+    # 'rsodb --help' and argument errors stay fast: the commands reach the archive (and h5py)
+    # through the lazy front door, only when they run.
+    code = (
+        "import sys; from rsodb.cli import build_parser; build_parser(); "
+        "print(sorted(m for m in sys.modules if m.startswith(('rsodb.archive', 'h5py', 'tqdm'))))"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=PROJECT_ROOT)
+    assert done.stdout.strip() == "[]"

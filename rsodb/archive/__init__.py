@@ -28,6 +28,7 @@ from rsodb.archive.stored import (
     PassSummary,
     ResultSummary,
     StoredPass,
+    utc_text,
 )
 
 __all__ = [
@@ -49,4 +50,5 @@ __all__ = [
     "ElementsReport",
     "CheckReport",
     "check_archive",
+    "utc_text",
 ]

@@ -7,7 +7,7 @@ import itertools
 import json
 import sys
 
-from rsodb.archive.stored import utc_text
+import rsodb
 from rsodb.cli.archive_options import add_archive_option, fail, open_archive
 
 __all__ = ["register", "run", "format_row", "COLUMNS"]
@@ -64,7 +64,7 @@ def register(subparsers) -> None:
 
 
 def _cells(row, with_periods: bool) -> tuple[str, ...]:
-    start = utc_text(row.start_utc, "s").replace("T", " ")
+    start = rsodb.archive.utc_text(row.start_utc, "s").replace("T", " ")
     cells = (
         row.pass_id,
         str(row.norad),

@@ -9,7 +9,6 @@ import math
 import numpy as np
 
 import rsodb
-from rsodb.archive.stored import utc_text
 from rsodb.cli.archive_options import add_archive_option, fail, open_archive
 
 __all__ = ["register", "run", "describe"]
@@ -49,7 +48,7 @@ def register(subparsers) -> None:
 
 
 def _iso(t: np.datetime64) -> str:
-    return utc_text(t) + "Z"
+    return rsodb.archive.utc_text(t) + "Z"
 
 
 def describe(stored, results: dict[str, dict[str, dict]], duplicates=()) -> dict:
