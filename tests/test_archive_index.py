@@ -129,6 +129,34 @@ def test_show_prints_the_values_of_stored_results(survey, capsys):
     assert values["candidates"][1] == {"period_s": 10.0, "power": 0.5}
 
 
+class Fit:
+    """A stand-in fit result: a verdict, a parameter summary and a long light-curve table."""
+
+    def to_hdf5(self, group):
+        group.attrs["verdict"] = "converged"
+        group.attrs["n_steps"] = 60
+        summary = np.zeros(2, dtype=[("name", "S24"), ("median", "f8")])
+        summary["name"], summary["median"] = [b"spin_period_s", b"precession_period_s"], [9.87, 1944.6]
+        group.create_dataset("summary", data=summary)
+        lightcurve = np.zeros(50, dtype=[("mag_obs", "f8"), ("mag_model", "f8")])
+        group.create_dataset("lightcurve", data=lightcurve)
+
+
+def test_show_puts_a_fits_parameters_first_and_counts_long_tables(tmp_path, shared_data, capsys):
+    archive = Archive(tmp_path / "archive")
+    archive.ingest(REAL_FILES[:1], progress=False, workers=0)
+    archive.store_result(TOPEX_ID, "fits", "quick", Fit())
+    assert main(["show", TOPEX_ID, "--archive", str(archive.path)]) == 0
+    text = capsys.readouterr().out
+    fits = text[text.index("fits       quick") :].splitlines()
+    assert fits[1].split() == ["verdict", "converged"] and fits[2].strip() == "summary:"
+    assert fits[3].split() == ["name", "median"]  # a header row, names left-aligned
+    assert fits[4].startswith("               spin_period_s ") and fits[4].split() == ["spin_period_s", "9.87"]
+    assert "lightcurve: 50 rows (--json lists them)" in text
+    assert main(["show", TOPEX_ID, "--archive", str(archive.path), "--json"]) == 0
+    assert len(json.loads(capsys.readouterr().out)["results"]["fits"]["quick"]["lightcurve"]) == 50
+
+
 def test_prefix_lookup_reads_only_the_object_it_names(survey, monkeypatch, tmp_path):
     source, _ = survey
     shutil.copytree(source.path, tmp_path / "archive")

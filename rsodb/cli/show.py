@@ -24,7 +24,7 @@ results with their values (period, error, verdict; a fit's parameters), the rows
 aside and the warnings about the file; --json gives all of it.
 """
 
-# Rows set aside that the text lists; --json gives all of them.
+# Rows set aside, and rows of a result's table, that the text lists; --json gives all of them.
 _ROWS_SHOWN = 20
 # Result values shown first (when a result has them), then the others in name order.
 _FIRST_KEYS = ("best_period_s", "uncertainty_s", "verdict", "reason", "n_cycles", "converged", "reduced_chi2")
@@ -143,21 +143,40 @@ def _number(value) -> str:
 def _result_lines(kind: str, name: str, values: dict) -> list[str]:
     stored = values.get("stored_utc", "")
     lines = [f"{kind:<10} {name}" + (f"  (stored {stored})" if stored else "")]
-    keys = [key for key in _FIRST_KEYS if key in values]
-    keys += sorted(
+    first = [key for key in _FIRST_KEYS if key in values]
+    rest = sorted(
         key
         for key, value in values.items()
-        if key not in keys and key not in _HIDDEN_KEYS and not isinstance(value, (list, dict))
+        if key not in first and key not in _HIDDEN_KEYS and not isinstance(value, (list, dict))
     )
-    for key in keys:
-        lines.append(f"             {key:<24} {_number(values[key])}")
-    for key, value in values.items():
-        if isinstance(value, list) and value and isinstance(value[0], dict):
-            columns = list(value[0])
-            lines.append(f"             {key}:")
-            lines.append("               " + "  ".join(f"{column:>12}" for column in columns))
-            for row in value:
-                lines.append("               " + "  ".join(f"{_number(row[column]):>12}" for column in columns))
+    tables = {
+        key: value for key, value in values.items() if isinstance(value, list) and value and isinstance(value[0], dict)
+    }
+    lines += [f"             {key:<24} {_number(values[key])}" for key in first]
+    if "summary" in tables:  # a fit's parameters, right after its verdict
+        lines += _table_lines("summary", tables.pop("summary"))
+    lines += [f"             {key:<24} {_number(values[key])}" for key in rest]
+    for key, rows in tables.items():
+        lines += _table_lines(key, rows)
+    return lines
+
+
+def _table_lines(key: str, rows: list[dict]) -> list[str]:
+    """A result's table, its columns as wide as their widest cell; long tables only counted."""
+    if len(rows) > _ROWS_SHOWN:
+        return [f"             {key}: {len(rows)} rows (--json lists them)"]
+    columns = list(rows[0])
+    cells = [[_number(row[column]) for column in columns] for row in rows]
+    widths = [max(len(column), *(len(row[i]) for row in cells)) for i, column in enumerate(columns)]
+    text = [isinstance(rows[0][column], str) for column in columns]  # left-aligned; numbers right
+    lines = [f"             {key}:"]
+    for row in [columns, *cells]:
+        lines.append(
+            "               "
+            + "  ".join(
+                cell.ljust(width) if left else cell.rjust(width) for cell, width, left in zip(row, widths, text)
+            ).rstrip()
+        )
     return lines
 
 
