@@ -339,14 +339,8 @@ class Archive:
 
         Parameters
         ----------
-        norad : int, optional
-            Only this object.
-        band : str, optional
-            Only this band (exact letter, e.g. ``"V"``).
-        site : str, optional
-            Only this site (name, case-insensitive).
-        all_versions : bool
-            Include versions superseded by a changed file (default: current versions only).
+        norad, band, site, all_versions
+            As in `summaries`.
 
         Returns
         -------
