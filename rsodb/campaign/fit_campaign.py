@@ -70,7 +70,8 @@ class CampaignOutcome:
         """One line of counts."""
         return (
             f"fit {self.name!r}: {len(self.fitted)} fitted, {len(self.skipped)} already done (skipped), "
-            f"{len(self.failed)} failed in {self.elapsed_s:.0f} s on {self.scheduler}"
+            f"{len(self.failed)} not fitted (failed, or no orbital elements) in {self.elapsed_s:.0f} s on "
+            f"{self.scheduler}"
         )
 
     def to_dict(self) -> dict:

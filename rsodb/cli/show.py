@@ -186,7 +186,8 @@ def _text(info: dict) -> str:
     lines = [
         f"pass       {info['pass_id']}  (version {info['version']}, {state}"
         + (f", replaces {info['supersedes']})" if info["supersedes"] else ")"),
-        f"object     {info['norad']} {info['name']}" + (f"  COSPAR {info['cospar']}" if info["cospar"] else ""),
+        f"object     {info['norad']} {info['name'] or '(no name)'}"
+        + (f"  COSPAR {info['cospar']}" if info["cospar"] else ""),
         f"site       {site['name']}  ({site['lat_deg']:.5f} N, {site['lon_deg']:.5f} E, {site['elevation_m']:.0f} m)",
         f"band       {info['band']}   exposure {info['exposure_s']:g} s",
         f"time       {info['start_utc']} .. {info['end_utc']}  ({info['duration_s']:.1f} s; {info['time_convention']})",
