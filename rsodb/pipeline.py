@@ -106,14 +106,17 @@ def run_pipeline(
     )
     summary["periods"] = {r.pass_id: {"period_s": r.best_period_s, "verdict": r.verdict} for r in survey.results}
 
-    rows = archive.catalog()
+    missing = {pass_id: ("periods", error) for pass_id, error in survey.failures}  # shown in the index
+
+    rows = archive.summaries()
     norads = sorted({row.norad for row in rows})
     if fit and rows:
         outcomes = _fit_all(archive, rows, fit_config, fit_name, workers, progress)
         for outcome in outcomes:
             log(outcome.summary())
             for pass_id, error in outcome.failed:
-                log(f"  {pass_id}: fit failed: {error}")
+                log(f"  {pass_id}: not fitted: {error}")
+                missing[pass_id] = ("fits", error)
         fit_name = outcomes[0].name
         summary["fits"] = [outcome.to_dict() for outcome in outcomes]
 
@@ -135,7 +138,7 @@ def run_pipeline(
                 )
             except ValueError as error:
                 log(f"object {norad}: no fit report ({error})")
-    index = build_index(archive, written, fit_name if fit and rows else None).write(out_dir / "index.html")
+    index = build_index(archive, written, fit_name if fit and rows else None, missing).write(out_dir / "index.html")
     summary["reports"] = [str(path) for _, _, path in written]
     summary["index"] = str(index)
     summary["elapsed_s"] = time.perf_counter() - started

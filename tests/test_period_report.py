@@ -74,6 +74,9 @@ def test_cli_table_output_and_errors(surveyed, capsys):
     )
     out = capsys.readouterr().out
     assert "too short" in out and "stored" not in out
+    header, row = out.splitlines()[:2]  # issue 19: the table has a header row
+    assert header.split() == ["PASS", "ID", "SYNODIC", "S", "+-", "ERR", "VERDICT", "SIDEREAL", "RANGE", "S"]
+    assert row.startswith("44517-20250130T173650-V-derenivka")
     assert main(["periods", "--archive", str(surveyed), "--processes", "0"]) == 2
     assert "--processes 0 must be at least 1" in capsys.readouterr().err
     with pytest.raises(SystemExit):

@@ -81,7 +81,7 @@ def test_pipeline_on_the_samples_writes_reports_and_fits_near_the_truth(tmp_path
     assert page.count("<tr>") == 1 + 5  # the header and one row per pass
 
     archive = Archive(tmp_path / "archive", create=False)
-    for row in archive.catalog():
+    for row in archive.summaries():
         stored = archive.get(row.pass_id)
         record = truth_by_file[stored.source_name]
         fit = archive.load_result(row.pass_id, "fits", "quick", FitResult.from_hdf5).to_dict()

@@ -91,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
             )
             print(f"{record['pass_id']:40s} {text:36s} {'converged' if record['converged'] else 'NOT converged'}")
         for pass_id, error in outcome.failed:
-            print(f"{pass_id:40s} failed: {error}")
+            print(f"{pass_id:40s} not fitted: {error}")
         print(outcome.summary())
         if report_path:
             print(f"wrote {report_path}")

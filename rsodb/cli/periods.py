@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 
 import rsodb
 from rsodb.cli.archive_options import add_archive_option, fail, open_archive
@@ -60,6 +61,10 @@ def _row(result) -> str:
     return f"{result.pass_id:40s} {period:>22s}  {result.verdict:18s}{sidereal}"
 
 
+# Above the rows of _row: the search gives the synodic period; the sidereal one lies in a range.
+HEADER = f"{'PASS ID':40s} {'SYNODIC S +- ERR':>22s}  {'VERDICT':18s}  SIDEREAL RANGE S"
+
+
 def run(args: argparse.Namespace) -> int:
     try:
         archive = open_archive(args)
@@ -79,6 +84,7 @@ def run(args: argparse.Namespace) -> int:
             store=not args.no_store,
             geometry=not args.no_geometry,
         )
+        damaged = archive.damaged(args.object)
     except (ValueError, TypeError, OSError) as error:
         return fail("periods", error)
     if args.json:
@@ -86,10 +92,18 @@ def run(args: argparse.Namespace) -> int:
     else:
         if not survey.results and not survey.failures:
             print(f"no passes in {args.archive}" + (f" for object {args.object}" if args.object else ""))
+        if survey.results:
+            print(HEADER.rstrip())
         for result in survey.results:
             print(_row(result))
         for pass_id, error in survey.failures:
             print(f"{pass_id:40s} failed: {error}")
         if survey.stored_as:
             print(f"stored {len(survey.results)} result(s) as '{survey.stored_as}'")
-    return 0 if survey.ok else 1
+    for item in damaged:
+        print(
+            f"rsodb periods: warning: {item.path} is damaged ({item.reason}); its passes were not searched. "
+            f"Run 'rsodb check --archive {args.archive} --repair'",
+            file=sys.stderr,
+        )
+    return 0 if survey.ok and not damaged else 1

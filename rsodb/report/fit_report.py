@@ -24,7 +24,7 @@ __all__ = [
 def load_fits(archive, norad: int, name: str = "default", band: str | None = None) -> list:
     """The stored `FitResult` of every pass of an object that has a fit called `name`, by date."""
     results = []
-    for row in archive.catalog(norad, band):
+    for row in archive.summaries(norad, band):
         if name in archive.result_names(row.pass_id, "fits"):
             results.append(archive.load_result(row.pass_id, "fits", name, FitResult.from_hdf5))
     return results
@@ -188,7 +188,7 @@ def build_campaign_report(
     ValueError
         When the object has no stored fits of that name.
     """
-    rows = archive.catalog(norad, band)
+    rows = archive.summaries(norad, band)
     results = load_fits(archive, norad, name, band)
     if not results:
         raise ValueError(

@@ -11,7 +11,7 @@ from rsodb.report.html import Document, Paragraph, Raw, Table
 __all__ = ["build_index"]
 
 
-def build_index(archive, written, fit_name: str | None) -> Document:
+def build_index(archive, written, fit_name: str | None, missing=None) -> Document:
     """The index page: links to every report and one table row per pass (period and fitted spin period).
 
     Parameters
@@ -21,9 +21,13 @@ def build_index(archive, written, fit_name: str | None) -> Document:
         The reports written, linked by file name.
     fit_name : str or None
         The stored fit shown in the table (None: no fit column values).
+    missing : dict of str to (str, str), optional
+        Why a pass has no value: pass id -> (column, reason), column ``"periods"`` or
+        ``"fits"``; the reason is shown in place of the value.
     """
+    missing = missing or {}
 
-    rows = archive.catalog()
+    rows = archive.summaries()
     names = {row.norad: row.name for row in rows}
     items = "".join(
         f'<li><a href="{html.escape(path.name)}">{html.escape(names.get(norad, str(norad)))} '
@@ -32,7 +36,9 @@ def build_index(archive, written, fit_name: str | None) -> Document:
     )
     table = []
     for row in rows:
-        period = fit = "-"
+        column, reason = missing.get(row.pass_id, ("", ""))
+        period = f"none: {reason}" if column == "periods" else "-"
+        fit = f"not fitted: {reason}" if column == "fits" else "-"
         if "default" in archive.result_names(row.pass_id, "periods"):
             result = archive.load_result(row.pass_id, "periods", "default", PeriodResult.from_hdf5)
             period = f"{result.best_period_s:.4f} +- {result.uncertainty_s:.4f} ({result.verdict})"

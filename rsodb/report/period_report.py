@@ -212,7 +212,7 @@ def build_period_report(
     ValueError
         When the object has no stored period results.
     """
-    rows = archive.catalog(norad, band)
+    rows = archive.summaries(norad, band)
     results = load_period_results(archive, norad, name, band)
     if not results:
         raise ValueError(
