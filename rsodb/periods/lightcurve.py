@@ -15,16 +15,12 @@ The pass trend
 --------------
 ccd_phot magnitudes are already reduced to a range of 1000 km, so what remains slow over a
 pass is the phase-angle dependence of the brightness (and, in files with the extinction sign
-error left uncorrected, airmass). Both are smooth, monotonic or single-humped functions of
-time over a few minutes, so `detrend` fits a low-degree polynomial in time (Legendre basis,
-degree 3 by default) by weighted least squares. A polynomial in time rather than in phase
-angle because it needs no orbit, and because over one pass the phase angle is itself a smooth
-function of time: a cubic in time spans any quadratic in phase angle to well under the
-photometric noise. Degree 3 has at most two turning points, so it cannot follow a periodic
-signal of three or more cycles - the fewest `rsodb.periods` accepts for a confident period;
-slower signals are reported as "too short" anyway. The period search itself refits the trend
-jointly with the harmonics, so detrending first is a convenience for plots and periodograms,
-not a step the period depends on.
+error left uncorrected, airmass): smooth, monotonic or single-humped over a few minutes.
+`detrend` removes a low-degree Legendre polynomial in time (degree 3 by default) by weighted
+least squares, for plots and periodograms. The period search does not depend on it: it fits the
+trend jointly with every Fourier model, with a degree held to the candidate's cycles in the pass
+(`rsodb.periods.harmonic.trend_degree_limit`: a trend may never imitate the candidate), so a
+short pass gets a constant or a line, not a cubic that cancels a one-cycle model.
 """
 
 from __future__ import annotations
