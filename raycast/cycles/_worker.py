@@ -64,7 +64,8 @@ def render_job(job, on_frame=None):
         ``materials_json`` (str, a JSON list of material entries), ``sun_body (m, 3)``,
         ``obs_body (m, 3)`` (unit vectors in the mesh frame), ``passes (p, 2)`` (samples, seed
         of each render of every frame), ``resolution_px`` (pixels across the larger side of the
-        projected footprint), ``sun_angle_deg`` and ``threads`` (0 = all cores).
+        projected footprint), ``sun_angle_deg``, ``threads`` (0 = all cores) and the object's
+        shadow terminator offsets ``terminator_geometry_offset`` and ``terminator_shading_offset``.
     on_frame : callable or None
         Called with the frame index after each frame's passes are done.
 
@@ -220,11 +221,13 @@ def _add_mesh(scene, job):
         mesh.normals_split_custom_set(corner_normals.reshape(-1, 3).tolist())
     mesh.update()
     model = bpy.data.objects.new("model", mesh)
-    # Blender's default shadow terminator geometry offset (0.1) starts shadow rays off
-    # low-poly smooth-shaded faces as if from the smooth surface: it lights tube segments that
-    # the mesh's own steps shadow at grazing Sun. The light curve is of the mesh as it is.
-    model.cycles.shadow_terminator_geometry_offset = 0.0
-    model.cycles.shadow_terminator_offset = 0.0
+    # The shadow terminator offsets live on the object (Blender 5: Object.shadow_terminator_*;
+    # the like-named properties under object.cycles are leftovers that Cycles no longer reads).
+    # Blender's default geometry offset (0.1) starts shadow rays off low-poly smooth-shaded faces
+    # as if from the smooth surface: it lights tube segments that the mesh's own steps shadow at
+    # grazing Sun. The job's default (0) renders the mesh as it is.
+    model.shadow_terminator_geometry_offset = float(job["terminator_geometry_offset"])
+    model.shadow_terminator_shading_offset = float(job["terminator_shading_offset"])
     scene.collection.objects.link(model)
     return model
 

@@ -38,6 +38,7 @@ from types import MappingProxyType
 import numpy as np
 from tqdm.auto import tqdm
 
+from raycast.renderer.brdf import GGX, Lambertian, Principled
 from raycast.renderer.materials import read_materials_json
 from raycast.renderer.meshio import read_obj
 
@@ -49,6 +50,7 @@ __all__ = [
     "render_cycles",
     "measure_noise",
     "MATERIAL_FIELDS",
+    "material_entry",
 ]
 
 INSTALL_HINT = "install the 'cycles' extra (pip install -e '.[cycles]') to render with Blender Cycles"
@@ -251,6 +253,23 @@ class CyclesMesh:
             material_names=tuple(mesh.material_names),
         )
 
+    @classmethod
+    def from_scene(cls, scene) -> CyclesMesh:
+        """The posed triangles, shading normals and BRDFs of a `raycast.renderer.scene.Scene`.
+
+        Each BRDF becomes the Blender node it models, with its parameters (grey colours: a
+        scene's BRDFs hold one colour channel), so both renderers are given the same surface.
+        """
+        posed = scene.posed()
+        return cls(
+            vertices_m=posed.vertices_m,
+            triangles=np.arange(len(posed.vertices_m)).reshape(-1, 3),
+            material_index=posed.material_index,
+            materials=tuple(material_entry(brdf) for brdf in scene.brdfs),
+            corner_normals=posed.corner_normals,
+            material_names=scene.material_names,
+        )
+
     # ---- operations returning new meshes ----
 
     def with_material(self, entry: Mapping) -> CyclesMesh:
@@ -278,6 +297,30 @@ class CyclesMesh:
     @property
     def n_triangles(self) -> int:
         return len(self.triangles)
+
+
+def material_entry(brdf) -> dict:
+    """The materials-JSON entry of the Blender node a `raycast.renderer.brdf` BRDF models."""
+    if isinstance(brdf, Lambertian):
+        return {"blender_node": "Diffuse BSDF", "color": [brdf.albedo] * 3}
+    if isinstance(brdf, GGX):
+        return {
+            "blender_node": "Glossy BSDF",
+            "color": [brdf.color] * 3,
+            "roughness": brdf.roughness,
+            "distribution": brdf.distribution,
+        }
+    if isinstance(brdf, Principled):
+        return {
+            "blender_node": "Principled BSDF",
+            "base_color": [brdf.base_color] * 3,
+            "metallic": brdf.metallic,
+            "roughness": brdf.roughness,
+            "specular_ior_level": brdf.specular_ior_level,
+            "ior": brdf.ior,
+            "distribution": brdf.distribution,
+        }
+    raise TypeError(f"{brdf!r} models no Blender node; give Lambertian, GGX or Principled BRDFs")
 
 
 def _finite_array(value, name, shape, dtype):
@@ -396,6 +439,11 @@ class CyclesSettings:
     process : {"subprocess", "in_process"}
         Run Blender in a child process (default; isolates Blender's bundled libraries and any
         crash) or in this one (saves ~1 s of start-up; resets bpy's current scene).
+    terminator_geometry_offset, terminator_shading_offset : float in [0, 1]
+        The mesh object's shadow terminator offsets (Blender's ``Object.shadow_terminator_*``).
+        0 (the default here) renders the mesh as it is; Blender's own defaults are 0.1 and 0,
+        with which shadow rays leave low-poly smooth-shaded faces as if from the smooth surface
+        they stand for (docs/cycles.md, "How a frame is rendered").
     """
 
     samples: int = 64
@@ -406,6 +454,8 @@ class CyclesSettings:
     channel: str = "green"
     noise_passes: int = 1
     process: str = "subprocess"
+    terminator_geometry_offset: float = 0.0
+    terminator_shading_offset: float = 0.0
 
     DEFAULT_RESOLUTION_PX = 128
 
@@ -429,6 +479,12 @@ class CyclesSettings:
             raise ValueError(
                 f"CyclesSettings sun_angle_deg={self.sun_angle_deg!r}; give degrees in [0, 10] (the Sun is 0.53)"
             )
+        for name in ("terminator_geometry_offset", "terminator_shading_offset"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= value <= 1.0:
+                raise ValueError(
+                    f"CyclesSettings {name}={value!r}; give a number in [0, 1] (0 renders the mesh as it is)"
+                )
         if self.channel not in ("mean", *_CHANNELS):
             raise ValueError(f"CyclesSettings channel={self.channel!r}; use 'green', 'red', 'blue' or 'mean'")
         if self.samples % self.noise_passes:
@@ -684,6 +740,8 @@ def _run(mesh, sun_body, obs_body, settings, passes, progress):
         "resolution_px": np.int64(settings.resolution_px),
         "sun_angle_deg": np.float64(settings.sun_angle_deg),
         "threads": np.int64(settings.threads or 0),
+        "terminator_geometry_offset": np.float64(settings.terminator_geometry_offset),
+        "terminator_shading_offset": np.float64(settings.terminator_shading_offset),
     }
     if mesh.corner_normals is not None:
         job["corner_normals"] = mesh.corner_normals

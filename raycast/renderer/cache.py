@@ -52,8 +52,9 @@ from scipy.spatial import ConvexHull, QhullError, cKDTree
 from tqdm.auto import tqdm
 
 from raycast.renderer import _cache_kernels
-from raycast.renderer.rays import check_directions, open3d_scene, sun_disk_directions, sun_samples_for
+from raycast.renderer.rays import check_directions, open3d_scene, orthonormal_basis, sun_samples_for
 from raycast.renderer.scene import Scene
+from raycast.renderer.shading import disk_shading
 
 __all__ = ["SceneCache", "cube_grid_directions", "cube_grid_weights"]
 
@@ -360,29 +361,34 @@ class SceneCache:
         # never negative; the factors' float32 rounding can make it -1e-7), and the mean shading
         # normal of its groups weighted by that area in each frame (so a class shared by faces
         # that are gated or shadowed differently is shaded where its light comes from).
-        area, normal = _cache_kernels.class_sums(
+        area, normal, geo = _cache_kernels.class_sums(
             weight, pose.normal_geo, pose.normal_shade, pose.group_class, sun32, obs32, pose.n_classes
         )
         total = np.zeros(m)
-        # One BRDF evaluation per material, on the (class, frame) pairs with light.
+        bend = self.scene.specular_normals == "cycles"
+        sun_u, sun_v = orthonormal_basis(sun)
+        # One BRDF evaluation per material, on the (class, frame) pairs with light, at the
+        # class's mean shading and geometric normals (raycast.renderer.shading.disk_shading).
         for material, begin, end in pose.material_blocks:
             frames, classes = np.nonzero(area[:, begin:end])
             if len(classes) == 0:
                 continue
             classes += begin
-            n = normal[frames, classes]
+            n = normal[frames, classes].astype(float)
             n /= np.linalg.norm(n, axis=1, keepdims=True)
-            cos_o = np.einsum("pk,pk->p", n, obs32[frames])
-            disk, disk_weights = sun_disk_directions(sun, self.sun_samples[material])
-            shading = np.zeros(len(classes), dtype=np.float32)
-            for sun_dir, disk_weight in zip(disk.astype(np.float32), disk_weights):
-                cos_s = np.einsum("pk,pk->p", n, sun_dir[frames])
-                cos_so = np.einsum("mk,mk->m", sun_dir, obs32)[frames]
-                shading += (
-                    np.float32(disk_weight)
-                    * self.scene.brdfs[material].shade(cos_s, cos_o, cos_so)
-                    * np.maximum(cos_s, np.float32(0.0))
-                )
+            g = geo[frames, classes].astype(float)
+            g /= np.linalg.norm(g, axis=1, keepdims=True)
+            shading = disk_shading(
+                self.scene.brdfs[material],
+                self.sun_samples[material],
+                n,
+                g,
+                obs[frames],
+                sun[frames],
+                sun_u[frames],
+                sun_v[frames],
+                bend,
+            )
             total += np.bincount(frames, weights=area[frames, classes] * shading, minlength=m)
         return total
 
@@ -491,7 +497,7 @@ def _add_bit_weight(out, pose, sun, obs, grid_size, edge_weights):
     )
     if len(frame):
         origins = _ray_origins(pose, edge_weights)
-        rays = _cache_kernels.pair_rays(need, frame, element, origins, sun32, obs32)
+        rays = _cache_kernels.pair_rays(need, frame, element, origins, pose.raw_normals, sun32, obs32)
         occluded = _raycaster(pose).test_occlusions(rays).numpy()
         _cache_kernels.add_pairs(
             out,
