@@ -44,6 +44,7 @@ from raycast.renderer.meshio import read_obj
 
 __all__ = [
     "CyclesMesh",
+    "ObjImport",
     "CyclesSettings",
     "CyclesResult",
     "NoiseStudy",
@@ -297,6 +298,57 @@ class CyclesMesh:
     @property
     def n_triangles(self) -> int:
         return len(self.triangles)
+
+    def job(self) -> dict:
+        """The arrays a render job takes."""
+        job = {
+            "vertices_m": self.vertices_m,
+            "triangles": self.triangles,
+            "material_index": self.material_index,
+            "materials_json": np.array(json.dumps([dict(entry) for entry in self.materials])),
+        }
+        if self.corner_normals is not None:
+            job["corner_normals"] = self.corner_normals
+        return job
+
+
+@dataclass(frozen=True, eq=False)
+class ObjImport:
+    """An OBJ file as Blender's own OBJ importer reads it (``forward_axis="Y", up_axis="Z"``:
+    the file is in Blender's axes), with a materials-JSON entry per ``usemtl`` name: the scene
+    is then Blender's, its triangulation of polygons and its shading normals included, not
+    the project's reading of the file (`CyclesMesh.from_obj`).
+
+    Attributes
+    ----------
+    path : Path
+    materials : tuple of (name, entry) pairs
+    """
+
+    path: Path
+    materials: tuple
+
+    @classmethod
+    def from_files(cls, path, materials_json) -> ObjImport:
+        """The OBJ at ``path`` with the entries of its ``usemtl`` names in ``materials_json``."""
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"OBJ file {path} does not exist; give the path of a Wavefront .obj")
+        table = read_materials_json(materials_json)
+        names = list(dict.fromkeys(read_obj(path).material_names))
+        unknown = [name for name in names if name not in table]
+        if unknown:
+            raise ValueError(
+                f'material {unknown[0]!r} used in {path} has no entry in {materials_json}; add it under "materials"'
+            )
+        return cls(path, tuple((name, _checked_material(table[name], name)) for name in names))
+
+    def job(self) -> dict:
+        return {
+            "obj_path": np.array(str(self.path.resolve())),
+            "materials_json": np.array(json.dumps([entry for _, entry in self.materials])),
+            "material_names_json": np.array(json.dumps([name for name, _ in self.materials])),
+        }
 
 
 def material_entry(brdf) -> dict:
@@ -627,7 +679,7 @@ def render_cycles(mesh, sun_body, obs_body, settings=None, progress=True) -> Cyc
 
     Parameters
     ----------
-    mesh : CyclesMesh
+    mesh : CyclesMesh or ObjImport
         The scene, in the body frame.
     sun_body : (m, 3) float
         Unit vectors from the object toward the Sun, body frame.
@@ -721,8 +773,10 @@ def _channel(rgb, channel):
 
 def _run(mesh, sun_body, obs_body, settings, passes, progress):
     """Validate the inputs, build the job and hand it to the runner `settings.process` names."""
-    if not isinstance(mesh, CyclesMesh):
-        raise TypeError(f"mesh is {type(mesh).__name__}; give a CyclesMesh (CyclesMesh.from_obj or from_arrays)")
+    if not isinstance(mesh, (CyclesMesh, ObjImport)):
+        raise TypeError(
+            f"mesh is {type(mesh).__name__}; give a CyclesMesh (CyclesMesh.from_obj or from_arrays) or an ObjImport"
+        )
     sun = _unit_directions(sun_body, "sun_body")
     obs = _unit_directions(obs_body, "obs_body")
     if len(sun) != len(obs):
@@ -730,10 +784,7 @@ def _run(mesh, sun_body, obs_body, settings, passes, progress):
     if not _bpy_available():
         raise ModuleNotFoundError(f"bpy (Blender as a Python module) is not installed; {INSTALL_HINT}")
     job = {
-        "vertices_m": mesh.vertices_m,
-        "triangles": mesh.triangles,
-        "material_index": mesh.material_index,
-        "materials_json": np.array(json.dumps([dict(entry) for entry in mesh.materials])),
+        **mesh.job(),
         "sun_body": sun,
         "obs_body": obs,
         "passes": np.asarray(passes, dtype=np.int64).reshape(-1, 2),
@@ -743,8 +794,6 @@ def _run(mesh, sun_body, obs_body, settings, passes, progress):
         "terminator_geometry_offset": np.float64(settings.terminator_geometry_offset),
         "terminator_shading_offset": np.float64(settings.terminator_shading_offset),
     }
-    if mesh.corner_normals is not None:
-        job["corner_normals"] = mesh.corner_normals
     with tqdm(total=len(sun), desc="Cycles", unit="frame", disable=not progress) as bar:
         return _RUNNERS[settings.process](job, lambda frame: bar.update(1))
 

@@ -283,3 +283,61 @@ def open_fraction(need, occluded, k):
     for i in range(n):
         fraction[i] = is_open[i].sum() / k
     return fraction
+
+
+@njit(cache=True, nogil=True)
+def visibility_rays(points, normals, directions, band, offset):
+    """Rays from elements toward grid directions, for the visibility tables of the build.
+
+    Every direction less than ``band`` (a sine) below an element's plane gets a ray; those
+    below the plane take their mirror image above it (see ``raycast.renderer.cache._visibility``).
+
+    Parameters
+    ----------
+    points, normals : (e, 3) float, element centroids and unit geometric normals.
+    directions : (d, 3) float, unit grid directions.
+    band : float; offset : float, how far above its element a ray starts.
+
+    Returns
+    -------
+    rays : (r, 6) float32; element, direction : (r,) int32, each ray's pair.
+    """
+    n_elements, n_directions = len(points), len(directions)
+    count = 0
+    for e in range(n_elements):
+        for d in range(n_directions):
+            h = normals[e, 0] * directions[d, 0] + normals[e, 1] * directions[d, 1] + normals[e, 2] * directions[d, 2]
+            if h > -band:
+                count += 1
+    rays = np.empty((count, 6), dtype=np.float32)
+    element = np.empty(count, dtype=np.int32)
+    direction = np.empty(count, dtype=np.int32)
+    row = 0
+    for e in range(n_elements):
+        ox = points[e, 0] + offset * normals[e, 0]
+        oy = points[e, 1] + offset * normals[e, 1]
+        oz = points[e, 2] + offset * normals[e, 2]
+        for d in range(n_directions):
+            h = normals[e, 0] * directions[d, 0] + normals[e, 1] * directions[d, 1] + normals[e, 2] * directions[d, 2]
+            if h <= -band:
+                continue
+            lift = -2.0 * min(h, 0.0)
+            x = directions[d, 0] + lift * normals[e, 0]
+            y = directions[d, 1] + lift * normals[e, 1]
+            z = directions[d, 2] + lift * normals[e, 2]
+            norm = np.sqrt(x * x + y * y + z * z)
+            rays[row, 0], rays[row, 1], rays[row, 2] = ox, oy, oz
+            rays[row, 3], rays[row, 4], rays[row, 5] = x / norm, y / norm, z / norm
+            element[row], direction[row] = e, d
+            row += 1
+    return rays, element, direction
+
+
+@njit(cache=True, nogil=True)
+def clear_bits(bits, element, direction, occluded):
+    """Clear the bit of each occluded ray's (element, direction) in ``bits`` (e, ceil(d / 8))
+    uint8, element-major, bit order as ``numpy.packbits`` (direction d at bit 7 - d % 8 of byte d // 8)."""
+    for r in range(len(occluded)):
+        if occluded[r]:
+            d = direction[r]
+            bits[element[r], d >> 3] &= np.uint8(255 - (1 << (7 - (d & 7))))
