@@ -88,7 +88,10 @@ def test_phase_above_150_deg(sphere, method):
     # terminator then cost 1% and 4% (measured with 81920 facets): finite and close, not exact.
     assert model.intensity_m2_sr[0] == pytest.approx(exact[0], rel=0.01)
     assert model.intensity_m2_sr[1] == pytest.approx(exact[1], rel=0.04)
-    assert model.intensity_m2_sr[2] == 0.0
+    # At 180 deg the limb seen from the observer is lit only by the part of the 0.53 deg solar
+    # disk that rises above it, at grazing incidence and exit: dark to rounding (1e-22 in the fast
+    # path), not necessarily exactly zero.
+    assert 0.0 <= model.intensity_m2_sr[2] < 1e-15
 
 
 def test_undersampled_glint_warns_with_the_fix():

@@ -18,8 +18,9 @@ Two frame sets of body-frame Sun and observer directions:
   of a flat panel's or the smooth surface's normal) and grazing (the Sun or the observer 2-5 deg
   above a panel's plane), drawn with a seed and kept where the scene reflects something.
 
-:func:`compare` renders a frame set with Cycles and the project's renderers and returns the
-magnitude differences; tests/test_cycles_scenes.py and bench/render.py use it.
+:func:`mag_difference` compares two renders of a frame set in magnitudes, leaving out frames
+too dark to observe; tests/test_render_cycles_agreement.py and ``bench/render.py --scenes`` render
+the frame sets with Cycles and the project's renderers and compare them with it.
 """
 
 from __future__ import annotations
