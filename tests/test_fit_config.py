@@ -16,9 +16,13 @@ from tests.conftest import PROJECT_ROOT
 
 
 class FakePeriods:
-    """Stands in for a stored PeriodResult: only `prior` is used."""
+    """Stands in for a stored PeriodResult: its verdict and `prior_interval_s` are used."""
 
-    def prior_interval_s(self, width_frac=0.01, frame="sidereal"):
+    best_period_s = 9.86
+    has_period = True
+    pass_id = "fake"
+
+    def prior_interval_s(self, width_frac=0.01, frame="sidereal", force=False):
         return 9.86 * (1 - width_frac), 9.86 * (1 + width_frac)
 
 
@@ -87,9 +91,12 @@ def test_defaults_and_overrides():
             {"model": {"attitude": "wobble"}},
             r"\[model\] attitude='wobble' is not one of precessing, inertial, torque_free",
         ),
-        ({"data": {"stride": 0}}, r"\[data\] stride=0 must be a whole number >= 1"),
+        ({"data": {"stride": 2}}, r"\[data\] stride is gone: a fixed stride strobes a periodic light curve"),
+        ({"data": {"windows": -1}}, r"\[data\] windows=-1 must be 0 \(chosen\) or a whole number >= 1"),
+        ({"model": {"materials": "x.json"}}, r"materials and articulations describe a mesh file: give mesh = PATH"),
+        ({"model": {"shape": "topex", "mesh": "x.obj"}}, r"gives both shape='topex' and mesh='x.obj'; keep one"),
         ({"sampler": {"n_walker": 4}}, r"\[sampler\] has unknown keys \['n_walker'\]"),
-        ({"parameters": {"spin_rate": 1.0}}, r"\[parameters\] 'spin_rate' is not a known parameter"),
+        ({"parameters": {"spin_rate": 1.0}}, r"\[parameters\] unknown parameter 'spin_rate'; known parameters"),
         (
             {"parameters": {"precession_angle_deg": {"kind": "uniform", "low": 0}}},
             r"prior of precession_angle_deg: uniform needs high",
@@ -128,7 +135,7 @@ def test_fit_command_fits_a_stored_pass_and_prints_json(tmp_path, capsys):
     from rsodb.fit.runner import FitProblem
     from tests.conftest import TOPEX_PHV
 
-    template = window(read_file(TOPEX_PHV)[0], 0.0, 20.0, stride=4)
+    template = window(read_file(TOPEX_PHV)[0], 0.0, 20.0, bin_size=4)
     record = {
         "model": {"shape": "ellipsoid", "n_sub": 1},
         "parameters": {"spin_period_s": {"kind": "uniform", "low": 9.5, "high": 10.2}},

@@ -329,6 +329,16 @@ class SpinStateModel:
         )
 
     @property
+    def epoch_utc(self) -> np.datetime64:
+        """The reference epoch of the phases, UTC."""
+        return self.geometry.time_utc[0] + np.timedelta64(int(round(self.epoch_s * 1e9)), "ns")
+
+    def on(self, geometry) -> SpinStateModel:
+        """The same model on other times (`geometry`), its phases still referred to `epoch_utc`."""
+        epoch_s = float((self.epoch_utc - geometry.time_utc[0]) / np.timedelta64(1, "s"))
+        return replace(self, geometry=geometry, epoch_s=epoch_s)
+
+    @property
     def parameters(self) -> tuple[str, ...]:
         """Every parameter name the model reads."""
         return ATTITUDES[self.attitude].parameters + self.brightness_parameters
