@@ -36,7 +36,7 @@ from raycast.geometry.attitude import InertialSpin, PrecessingSpin, TorqueFree
 from raycast.renderer.photometry import magnitude, solar_magnitude
 from raycast.renderer.scene import icosphere
 
-__all__ = ["ConvexFacets", "SpinStateModel", "AttitudeFamily", "ATTITUDES", "EpochShifted"]
+__all__ = ["ConvexFacets", "SpinStateModel", "AttitudeFamily", "ATTITUDES", "EpochShifted", "make_attitude"]
 
 
 # -- brightness: an analytic convex body ---------------------------------------------------
@@ -260,6 +260,37 @@ ATTITUDES: Mapping[str, AttitudeFamily] = MappingProxyType(
 )
 
 
+def make_attitude(family: str, values: Mapping[str, float], settings: Mapping | None = None, epoch_s: float = 0.0):
+    """The attitude model of a family at parameter values, phases at `epoch_s`.
+
+    Parameters
+    ----------
+    family : str
+        A key of `ATTITUDES`.
+    values : mapping of str to float
+        At least the family's parameters (`AttitudeFamily.parameters`).
+    settings : mapping, optional
+        The family's settings, e.g. ``{"spin_axis": "x"}``.
+    epoch_s : float
+        Reference time of the phases, seconds after the time origin of the geometry it is used
+        with (a fit's: its window's mid-time).
+    """
+    if family not in ATTITUDES:
+        raise ValueError(f"unknown attitude model {family!r}; use one of {', '.join(ATTITUDES)}")
+    spec = ATTITUDES[family]
+    missing = [name for name in spec.parameters if name not in values]
+    if missing:
+        raise ValueError(
+            f"the {family} attitude needs {', '.join(missing)}; give every one of {', '.join(spec.parameters)}"
+        )
+    unknown = sorted(set(settings or {}) - set(spec.settings))
+    if unknown:
+        raise ValueError(
+            f"attitude model {family!r} has no settings {unknown}; it accepts {', '.join(spec.settings) or 'none'}"
+        )
+    return EpochShifted(spec.build(values, **dict(settings or {})), float(epoch_s))
+
+
 # -- the forward model -----------------------------------------------------------------------
 @dataclass(frozen=True, eq=False)
 class SpinStateModel:
@@ -349,8 +380,7 @@ class SpinStateModel:
 
     def attitude_model(self, values: Mapping[str, float]):
         """The attitude for these values, phases referred to `epoch_s`."""
-        family = ATTITUDES[self.attitude]
-        return EpochShifted(family.build(values, **self.attitude_settings), self.epoch_s)
+        return EpochShifted(ATTITUDES[self.attitude].build(values, **self.attitude_settings), self.epoch_s)
 
     def supports(self, values: Mapping[str, float]) -> bool:
         """False where the values describe no physical body (impossible inertia ratios, albedo > 1)."""

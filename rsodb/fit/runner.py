@@ -38,6 +38,7 @@ __all__ = [
     "load_periods",
     "reference_range_km",
     "shape_store_for",
+    "spin_period_bounds",
     "SEARCH_BIN_TURN_DEG",
 ]
 
@@ -59,7 +60,8 @@ def shape_store_for(archive) -> ShapeStore:
     return ShapeStore(Path(archive.path) / "shapes")
 
 
-def _spin_period_bounds(space) -> tuple[float, float]:
+def spin_period_bounds(space) -> tuple[float, float]:
+    """(fastest, slowest) spin period a parameter space allows (its prior's support, or the fixed value)."""
     if "spin_period_s" in space.fixed:
         value = abs(space.fixed["spin_period_s"])
         return value, value
@@ -133,7 +135,7 @@ class FitProblem:
         pass_id = getattr(observed, "pass_id", "") or observed.source_name
         shape_name, shape_spec = shape or resolve_shape(config.model, observed.norad)
         space = config.parameter_space(shape_spec.articulations, periods)
-        bounds = _spin_period_bounds(space)
+        bounds = spin_period_bounds(space)
         selection = select_samples(observed, config.data, bounds, pass_id)
         brightness_names = set(shape_spec.articulations) | set(MATERIAL_PARAMETERS)
         free_bounds = {p.name: p.prior.bounds for p in space.free if p.name in brightness_names}
@@ -202,7 +204,7 @@ class FitProblem:
         """Exposure sub-samples of the pass-wide curves: the fit's, or chosen for one sample's exposure."""
         if self.config.model.n_sub:
             return self.config.model.n_sub
-        fastest = _spin_period_bounds(self.posterior.space)[0]
+        fastest = spin_period_bounds(self.posterior.space)[0]
         return choose_n_sub(self.observed.exposure_s, fastest)
 
     def summarise(self, run, periods=None) -> FitResult:
@@ -213,7 +215,7 @@ class FitProblem:
         best, draws = best_and_draws(
             run, space, config.discard, max(config.band_draws, CONVENTION_DRAWS), config.sampler.seed
         )
-        fastest = _spin_period_bounds(space)[0]
+        fastest = spin_period_bounds(space)[0]
         pass_curve, model_curve = pass_curves(
             self.posterior,
             self.observed,
