@@ -11,7 +11,7 @@ period?", draws them):
 ``orbit_frame``
     Relative to the local orbital frame, which does not precess: ``1 / P_orb = 1 / P + cos(theta)
     / P_pr`` for the precessing family (the spin-axis component of the precession rate; for
-    P = 40.5 s, P_pr = 1620 s, theta = 7 deg the two differ by 2.4%).
+    P = 40.5 s, P_pr = 1620 s, theta = 7 deg the rates differ by 2.5%).
 ``inertial``
     Relative to inertial space (sidereal): the orbit frame's own rotation (one turn per orbit)
     projected on the spin axis is added.
@@ -36,7 +36,7 @@ from scipy.spatial.transform import Rotation
 
 from rsodb.fit.curves import geometry_at
 
-__all__ = ["CONVENTIONS", "spin_periods", "rates_hz"]
+__all__ = ["CONVENTIONS", "spin_periods", "rates_hz", "angle_steps_about", "bisector_azimuth"]
 
 CONVENTIONS = {
     "parameter": "the fitted spin_period_s (precessing: relative to the precessing frame; inertial: sidereal)",
@@ -49,10 +49,29 @@ _MAX_STEPS = 20_000
 _AXES = {"x": 0, "y": 1, "z": 2}
 
 
-def _angle_about(rotations: np.ndarray, axis: int) -> np.ndarray:
-    """(n-1,) rotation angle about body `axis` between consecutive (n, 3, 3) body-to-frame rotations."""
+def angle_steps_about(rotations: np.ndarray, axis: int) -> np.ndarray:
+    """(n-1,) rotation angle (rad) about body `axis` between consecutive (n, 3, 3) body-to-frame
+    rotations: the axis-angle vector of ``R_i^T R_(i+1)`` projected on the axis."""
     step = np.einsum("nji,njk->nik", rotations[:-1], rotations[1:])
     return Rotation.from_matrix(step).as_rotvec()[:, axis]
+
+
+def bisector_azimuth(rotations: np.ndarray, geometry, axis: int) -> np.ndarray:
+    """(n,) unwrapped azimuth (rad) of the Sun-observer bisector about body `axis`, right-handed.
+
+    Parameters
+    ----------
+    rotations : (n, 3, 3) float
+        Body-to-GCRS rotations at the geometry's times.
+    geometry : PassGeometry
+        One sub-sample per time.
+    axis : int
+        0, 1, 2 for body x, y, z.
+    """
+    bisector = np.einsum("nji,nj->ni", rotations, geometry.sun_gcrs[:, 0] + geometry.obs_gcrs[:, 0])
+    # Cyclic order keeps the azimuth right-handed about the axis (x: y->z, y: z->x, z: x->y).
+    first, second = (axis + 1) % 3, (axis + 2) % 3
+    return np.unwrap(np.arctan2(bisector[:, second], bisector[:, first]))
 
 
 def rates_hz(model, values, geometry, axis: str) -> dict[str, float]:
@@ -72,14 +91,10 @@ def rates_hz(model, values, geometry, axis: str) -> dict[str, float]:
     lvlh = geometry.lvlh_gcrs[:, 0]
     rotations = attitude.orientation(geometry.t_s, lvlh)
     span = float(geometry.t_s[-1] - geometry.t_s[0])
-    inertial = float(np.sum(_angle_about(rotations, k))) / span
+    inertial = float(np.sum(angle_steps_about(rotations, k))) / span
     relative = np.einsum("nji,njk->nik", lvlh, rotations)
-    orbit = float(np.sum(_angle_about(relative, k))) / span
-    bisector = np.einsum("nji,nj->ni", rotations, geometry.sun_gcrs[:, 0] + geometry.obs_gcrs[:, 0])
-    others = [i for i in range(3) if i != k]
-    # Cyclic order keeps the azimuth right-handed about the axis (x: y->z, y: z->x, z: x->y).
-    first, second = (others[0], others[1]) if k != 1 else (2, 0)
-    azimuth = np.unwrap(np.arctan2(bisector[:, second], bisector[:, first]))
+    orbit = float(np.sum(angle_steps_about(relative, k))) / span
+    azimuth = bisector_azimuth(rotations, geometry, k)
     light = -float(azimuth[-1] - azimuth[0]) / span
     turn = 2 * math.pi
     return {"orbit_frame": orbit / turn, "inertial": inertial / turn, "light_curve": light / turn}

@@ -115,9 +115,10 @@ class ShapeStore:
             ``build() -> SceneCache``, called only when no stored cache matches.
         """
         key = self.key(scene, settings)
-        if key in _MEMORY:
-            _MEMORY.move_to_end(key)
-            return _MEMORY[key]
+        remembered = (str(self.directory), key)
+        if remembered in _MEMORY:
+            _MEMORY.move_to_end(remembered)
+            return _MEMORY[remembered]
         path = self.path(key)
         if path is None:
             cache = build()
@@ -133,7 +134,7 @@ class ShapeStore:
                         _save(cache, path)
                 finally:
                     fcntl.flock(lock, fcntl.LOCK_UN)
-        _MEMORY[key] = cache
+        _MEMORY[remembered] = cache
         while len(_MEMORY) > _IN_MEMORY:
             _MEMORY.popitem(last=False)
         return cache
