@@ -115,8 +115,28 @@ def test_topex_dimensions_and_articulation():
         # Rotation of +x about +y by the pitch: (cos p, 0, -sin p).
         p = math.radians(pitch)
         np.testing.assert_allclose(normal, [math.cos(p), 0.0, -math.sin(p)], atol=1e-12)
+    # The bus is the IDS macro-model's box: faces of 8.32, 8.18 and 4.71 m^2.
+    bus = scene.part_index == scene.part_names.index("bus")
+    normals = mesh.face_normals[bus]
+    for axis, area in ((2, 8.32), (1, 8.18), (0, 4.71)):
+        assert mesh.areas_m2[bus][normals[:, axis] > 0.5].sum() == pytest.approx(area, rel=1e-12)
+    # Extent at pitch 0: the bus's 3.80 m along x; along y half the bus, the 1 m yoke and the
+    # 8.89 m array on one side and half the bus on the other; along z the 3.30 m array (+-1.65)
+    # and, below the zenith face, the 2.6 m boom and the 0.2 m deep 1.3 m dish.
     extent = np.ptp(topex.build(panel_pitch_deg=0.0).corners_m.reshape(-1, 3), axis=0)
-    assert extent[0] == pytest.approx(5.5) and extent[2] > 6.6
+    x_m, y_m, z_m = topex.BUS_SIZE_M
+    np.testing.assert_allclose(extent, [x_m, y_m + 1.0 + 8.89, 1.65 + z_m / 2 + 2.6 + 0.2], atol=1e-9)
+    assert (round(x_m, 2), round(y_m, 2), round(z_m, 2)) == (3.80, 2.19, 2.15)
+
+
+def test_topex_surface_parameters_change_only_their_class():
+    base, shiny = topex.surface_brdfs(), topex.surface_brdfs(cells_roughness=0.3, bus_albedo=0.7)
+    assert base["solar_cells"].roughness == 0.15 and shiny["solar_cells"].roughness == 0.3
+    assert shiny["bus"].base_color == 0.7 and shiny["array_back"] == base["array_back"]
+    with pytest.raises(ValueError, match=r"cells_specular=2.0 is outside its range \[0.5, 1.0\]"):
+        topex.surface_brdfs(cells_specular=2.0)
+    with pytest.raises(ValueError, match=r"unknown TOPEX surface parameter\(s\) \['gloss'\]"):
+        topex.build(gloss=0.1)
 
 
 def test_articulation_parameter_validation():

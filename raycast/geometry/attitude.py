@@ -1,54 +1,10 @@
 """Attitude models: body-to-GCRS rotations as arrays over time.
 
-An attitude model is a small immutable object with one method,
-``orientation(t_s, lvlh_gcrs=None) -> (..., 3, 3)``, returning for every time the rotation
-matrix R that takes body-frame vectors to GCRS (``v_gcrs = R @ v_body``). ``t_s`` are seconds
-since the pass's first observed time (`raycast.geometry.PassGeometry.t_s`); ``lvlh_gcrs`` are
-the local orbital frames at those times (`PassGeometry.lvlh_gcrs`; columns x along-track,
-y = -orbit normal, z = nadir), which only the orbit-bound model reads. Construction only checks
-numbers, so a fitter can build one per MCMC step.
-
-Conventions shared by all models
---------------------------------
-* Angles are degrees, periods seconds. A positive period turns the body right-handedly about
-  the +axis named; a negative period turns it the other way; ``numpy.inf`` stops the motion.
-  Periods may not be 0 or NaN.
-* ``spin_axis`` names the body axis that spins (``"x"``, ``"y"`` or ``"z"``). The *reference
-  axis* whose angle the spin phase measures is the next body axis in cyclic order
-  (z -> x, x -> y, y -> z); the third body axis completes the right-handed triad. Internally the
-  body axes are relabelled cyclically (a proper rotation) to a spin frame (s1, s2, s3) with
-  s3 = spin axis and s1 = reference axis.
-* Phases are angles at ``t_s = 0``; the angle at time t is ``phase + 360 t / period``.
-
-Models
-------
-`PrecessingSpin` (the seed paper's model, bound to the orbit)
-    ``R = LVLH @ Rz(phi) @ Ry(theta) @ Rz(psi)`` (then the spin-frame relabelling): a z-y-z
-    Euler sequence in the local orbital frame. ``theta`` = precession (cone half-) angle between
-    the spin axis and nadir; ``phi = precession_phase + 360 t / precession_period`` the azimuth
-    of the spin axis around nadir, measured from LVLH +x (along-track) toward +y (-orbit
-    normal), i.e. right-handed about nadir; ``psi = phase + 360 t / period`` the spin angle
-    about the spin axis. The spin axis is ``(sin theta cos phi, sin theta sin phi, cos theta)``
-    in LVLH: at theta = 0 it points at the Earth's centre; at phi = 0 it leans toward the
-    direction of motion. At psi = 0 the reference axis lies in the plane of nadir and the
-    spin axis, on the side away from the Earth (its nadir component is -sin theta). Both
-    periods are relative to the rotating LVLH frame ("the whole moves with the orbit"): with no
-    spin and no precession the body keeps its attitude to the local vertical.
-`InertialSpin`
-    ``R = Rz(ra + 90) @ Rx(90 - dec) @ Rz(W)`` with ``W = phase + 360 t / period``: the IAU
-    convention for planetary rotation (Archinal et al. 2018, WGAS report). The spin axis
-    points to (ra, dec) in GCRS; W is measured from the ascending node of the body's equator
-    on the ICRF equator (GCRS direction ``z x pole``, RA = ra + 90) counterclockwise about
-    the pole to the reference axis.
-`TorqueFree`
-    Euler's equations for a rigid body with principal moments (I_x, I_y, I_z) along the body
-    axes, with attitude kinematics for the unit quaternion, integrated from ``t_s = 0``
-    (forward and backward) with LSODA (scipy's ``odeint``: Adams-Moulton methods of order up
-    to 12 on this non-stiff problem) at rtol = atol = 1e-13, straight to the requested times.
-    Results are cached by (parameters, times).
-
-The figure docs/img/attitude_conventions.png (made by docs/figures/attitude_conventions.py)
-draws these conventions.
+Each model is an immutable object with one method, ``orientation(t_s, lvlh_gcrs=None) ->
+(..., 3, 3)``, the rotations R with ``v_gcrs = R @ v_body`` at seconds ``t_s`` since the pass's
+first observed time: `PrecessingSpin` (the seed paper's, bound to the orbit), `InertialSpin`
+(IAU pole and prime meridian) and `TorqueFree` (Euler's equations). docs/geometry.md states the
+angle conventions and draws them (docs/img/attitude_conventions.png).
 
 Examples
 --------

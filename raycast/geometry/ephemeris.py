@@ -11,7 +11,7 @@ Both objects are loaded once per process and shared; they are read-only.
 
 Examples
 --------
->>> from raycast import ephemeris
+>>> from raycast.geometry import ephemeris
 >>> ts = ephemeris.timescale()
 >>> sun = ephemeris.planets()["sun"]
 """

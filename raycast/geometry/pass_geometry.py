@@ -1,52 +1,10 @@
 """Pass geometry: where the satellite, the observer and the Sun are, as arrays over time.
 
-`PassGeometry.compute` does everything for all times in one vectorised call:
-
-1. SGP4 (``sgp4``'s C ``sgp4_array``) gives TEME positions and velocities.
-2. The slowly varying parts of the Earth's orientation and the Sun's position are computed with
-   skyfield (offline, `raycast.geometry.ephemeris`) only at nodes 60 s apart on the TT axis and
-   interpolated linearly: the TEME->GCRS matrix, the matrix Q that takes GCRS to ITRS once the
-   Earth rotation angle (ERA) is taken out (``ITRS = Rz(-ERA) Q GCRS``; Q holds
-   precession-nutation and the equation of the origins), Delta T, and the apparent geocentric
-   Sun (light time and annual aberration). The fast part, the ERA, is evaluated exactly at
-   every time from UT1 (leap seconds looked up per time). The interpolation error is measured
-   in tests/test_geometry.py against skyfield evaluated at every time: below 1 mm in position
-   and 1e-10 rad in the Sun's direction.
-3. Observer, topocentric azimuth/elevation (geodetic, WGS84 site), range, range rate, the
-   Sun and observer directions from the satellite, phase angle, Earth shadow
-   (`raycast.geometry.shadow`), refraction (`raycast.geometry.refraction`, PyEphem's model) and airmass follow
-   as array arithmetic.
-
-Positions are geometric (no light time between satellite and observer, as PyEphem and
-skyfield compute satellites); the Sun is its apparent geocentric position (light time,
-aberration), and the satellite's own velocity aberration (under 6 arcsec) is ignored.
-ITRS has no polar motion (see `raycast.geometry.ephemeris`).
-
-Frames and conventions
-----------------------
-* GCRS: geocentric, ICRF axes. All ``*_gcrs`` vectors and matrices use it.
-* ITRS: Earth-fixed (WGS84 axes).
-* Local orbital frame (LVLH), the columns of ``lvlh_gcrs`` (v_gcrs = lvlh_gcrs @ v_lvlh):
-  ``z`` = nadir, the unit vector from the satellite to the Earth's centre (-r/|r|);
-  ``y`` = minus the orbit normal, -(r x v)/|r x v| (r, v in GCRS);
-  ``x`` = y x z, along-track, equal to the velocity direction on a circular orbit.
-  This is the CCSDS "LVLH" frame; the seed paper's precessing-spin model (see
-  `raycast.geometry.attitude.PrecessingSpin`) puts its precession cone around the ``z`` column.
-* Azimuth from geographic north through east; elevation above the ellipsoid's tangent plane.
-* Time: ``t_s`` are seconds since ``time_utc[0]`` (the first observed time); attitude models
-  take these times.
-
-Exposure sub-samples
---------------------
-Each observed time (mid-exposure) is integrated over its exposure with ``k`` equally weighted
-sub-samples at the midpoints of ``k`` equal slices of the exposure (the midpoint rule):
-offsets ``exposure_s * ((j + 0.5) / k - 0.5)``, weights ``1 / k``. Equal weights, not
-Gauss nodes, because glints make the integrand far from smooth. When ``n_sub`` is None,
-``k = ceil(360 * exposure_s / (|spin_period_s| * 2 deg))``: the body turns at most 2 deg per
-sub-sample, which keeps the midpoint error of a smoothly varying light curve under ~1e-4 mag
-(a harmonic advancing by phi per slice is averaged with a relative error ~phi^2 / 24);
-``spin_period_s`` defaults to `DEFAULT_SPIN_PERIOD_S` = 10 s, a typical fast tumbler (TOPEX
-9.9 s), so a 0.2 s exposure gets 4 sub-samples and 0.1 s gets 2. ``k`` is capped at 64.
+`PassGeometry.compute` (or `PassGeometry.from_pass`) gives every frame's geometry in one
+vectorised call: SGP4 positions, Earth orientation and the apparent Sun interpolated from
+skyfield nodes, topocentric Az/El with refraction, range, phase angle, Earth shadow, the local
+orbital frame and exposure sub-samples. docs/geometry.md states every frame, convention and
+approximation, with the measured errors against skyfield.
 
 Examples
 --------

@@ -1,91 +1,182 @@
-"""TOPEX/Poseidon (NORAD 22076), a plausible shape and material model built by code.
+"""TOPEX/Poseidon (NORAD 22076) from published dimensions and layout, with fittable surface classes.
 
-Dimensions (public sources; the layout below is ours, within their stated sizes):
-
-* Spacecraft envelope 5.5 m x 2.8 m x 6.6 m including the instrument module; launch mass
-  2400 kg (NASA/JPL TOPEX/Poseidon mission fact sheet; ESA eoPortal "TOPEX/Poseidon").
-* Single-wing solar array of 8.89 m x 3.30 m on a boom, rotating about the boom (pitch) axis
-  (eoPortal; Kucharski et al. 2017, GRL 44, "Spin rate of TOPEX/Poseidon"). The reference paper
-  fitted a pitch near 12 deg, the default here.
-* A 1.5 m high-gain (TDRSS) antenna dish on a mast at the top of the bus (eoPortal).
-
-Uncertainties: the split between the multimission bus and the instrument module, the boom
-length (1.5 m here), the mast height (1 m) and the dish's position are not in the sources and
-are guesses of +-0.5 m; surface finishes are generic (MLI blankets as glossy foil, solar cells
-as dark glossy glass, radiators as white diffuse paint).
-
-Body frame: +Z is the long (former yaw) axis, the high-gain antenna at +Z; the solar-array boom
-leaves the bus along +Y; at ``panel_pitch_deg = 0`` the cells face +X, and the pitch rotates
-the array about the boom axis (+Y, right-hand rule).
+docs/models.md gives the source of every dimension and every prior, and says what is assumed.
+Body frame (the mission's): +z yaw (nadir in normal operations; the axis TOPEX spins about
+today), +y pitch (the solar-array axis), +x roll. The array leaves the bus along -y (port side);
+at ``panel_pitch_deg = 0`` its cells face +x, and the pitch turns it about +y (right hand).
 """
 
 from __future__ import annotations
 
-import numpy as np
+from dataclasses import dataclass
+import math
 
-from raycast.renderer.brdf import GGX, Lambertian
+from raycast.renderer.brdf import Lambertian, Principled
 from raycast.renderer.scene import Articulation, Part, Scene
 
-__all__ = ["build", "MATERIALS", "ARRAY_SIZE_M", "ENVELOPE_M"]
+__all__ = [
+    "build",
+    "surface_brdfs",
+    "SurfaceParameter",
+    "SURFACE_PARAMETERS",
+    "BUS_SIZE_M",
+    "BUS_FACE_AREAS_M2",
+    "ARRAY_SIZE_M",
+    "ALTIMETER_DIAMETER_M",
+    "HGA_DIAMETER_M",
+    "HGA_BOOM_M",
+    "YOKE_M",
+]
 
-ENVELOPE_M = (5.5, 2.8, 6.6)
+# The IDS radiation-pressure macro-model's box (Cerri et al., as used by Sagnieres, Sharf &
+# Deleflie 2020): faces of 8.32 (x-y), 8.18 (x-z) and 4.71 (y-z) m^2; the edges follow.
+BUS_FACE_AREAS_M2 = {"xy": 8.32, "xz": 8.18, "yz": 4.71}
+_X = math.sqrt(BUS_FACE_AREAS_M2["xy"] * BUS_FACE_AREAS_M2["xz"] / BUS_FACE_AREAS_M2["yz"])
+BUS_SIZE_M = (_X, BUS_FACE_AREAS_M2["xy"] / _X, BUS_FACE_AREAS_M2["xz"] / _X)
+# Single wing, 8.89 m x 3.30 m (JPL "Perspectives on an Ocean Planet"), pitching about body y
+# through the bus (Sagnieres et al. 2020).
 ARRAY_SIZE_M = (8.89, 3.30)
-BOOM_LENGTH_M = 1.5
-ARRAY_THICKNESS_M = 0.03
+ARRAY_THICKNESS_M = 0.04
+# Gap between the bus's -y face and the array's inner edge: not published (the yoke); assumed.
+YOKE_M = 1.0
+# Radar altimeter dish on the nadir face (AVISO, TOPEX altimeter): 1.5 m.
+ALTIMETER_DIAMETER_M = 1.5
+ALTIMETER_DEPTH_M = 0.25
+# TDRSS high-gain antenna: 1.3 m dish on a 2.6 m boom on the zenith side (JPL, HGA page).
+HGA_DIAMETER_M = 1.3
+HGA_DEPTH_M = 0.2
+HGA_BOOM_M = 2.6
 
-MATERIALS = {
-    "mli_foil": GGX(color=0.45, roughness=0.35),
-    "radiator": Lambertian(albedo=0.80),
-    "solar_cells": GGX(color=0.08, roughness=0.15),
-    "array_back": Lambertian(albedo=0.15),
-    "antenna": Lambertian(albedo=0.70),
-    "boom": Lambertian(albedo=0.50),
+
+@dataclass(frozen=True)
+class SurfaceParameter:
+    """A free reflectance parameter of one surface class, with its prior range and source."""
+
+    default: float
+    low: float
+    high: float
+    meaning: str
+    source: str
+
+
+SURFACE_PARAMETERS = {
+    "cells_specular": SurfaceParameter(
+        0.5,
+        0.5,
+        1.0,
+        "solar cells: Specular IOR Level of the cover glass (F0 = 0.08 x level at IOR 1.5)",
+        "first-surface specular reflectance of cells 0.04-0.125 (Space Solar Power Review 1(3), 1980)",
+    ),
+    "cells_roughness": SurfaceParameter(
+        0.15,
+        0.05,
+        0.5,
+        "solar cells: roughness of the specular lobe (alpha = roughness^2)",
+        "a narrow main specular peak (Small, Butler & Marciniak 2021, Opt. Express 29, 35501)",
+    ),
+    "bus_albedo": SurfaceParameter(
+        0.4,
+        0.1,
+        0.8,
+        "bus (MLI blankets, aluminium instrument module): diffuse albedo",
+        "MLI and aluminium panels span 0.1-0.8 (Rodriguez et al., AMOS 2007; Willison & Bedard, AMOS)",
+    ),
+    "bus_specular": SurfaceParameter(
+        0.5,
+        0.0,
+        1.0,
+        "bus: Specular IOR Level of its glossy term (F0 = 0.08 x level)",
+        "MLI foil and the instrument module's louvers are glossy (JPL, instrument module page)",
+    ),
+    "back_albedo": SurfaceParameter(
+        0.5,
+        0.1,
+        0.8,
+        "solar-array back: diffuse albedo",
+        "Kapton array substrate, diffuse 0.67 (Space Solar Power Review 1(3), 1980)",
+    ),
 }
+# Fixed parts of the surface classes (not fitted): the cells' dark diffuse layer, the roughness
+# of the bus's glossy term, and the antennas' white paint.
+CELLS_DIFFUSE = 0.05
+BUS_ROUGHNESS = 0.35
+ANTENNA_ALBEDO = 0.7
 
 
-def build(panel_pitch_deg: float = 12.0, materials: dict | None = None) -> Scene:
+def surface_brdfs(**values) -> dict:
+    """The BRDF of every material of the model for given surface parameters.
+
+    Parameters
+    ----------
+    **values : float
+        Any of `SURFACE_PARAMETERS` (the rest take their defaults).
+
+    Returns
+    -------
+    dict of str to BRDF
+        Keyed by the model's material names.
+    """
+    unknown = sorted(set(values) - set(SURFACE_PARAMETERS))
+    if unknown:
+        raise ValueError(f"unknown TOPEX surface parameter(s) {unknown}; known: {', '.join(SURFACE_PARAMETERS)}")
+    p = {name: float(values.get(name, spec.default)) for name, spec in SURFACE_PARAMETERS.items()}
+    for name, value in p.items():
+        spec = SURFACE_PARAMETERS[name]
+        if not (math.isfinite(value) and spec.low <= value <= spec.high):
+            raise ValueError(f"TOPEX surface parameter {name}={value!r} is outside its range [{spec.low}, {spec.high}]")
+    return {
+        "solar_cells": Principled(
+            base_color=CELLS_DIFFUSE, roughness=p["cells_roughness"], specular_ior_level=p["cells_specular"]
+        ),
+        "bus": Principled(base_color=p["bus_albedo"], roughness=BUS_ROUGHNESS, specular_ior_level=p["bus_specular"]),
+        "array_back": Lambertian(albedo=p["back_albedo"]),
+        "antenna": Lambertian(albedo=ANTENNA_ALBEDO),
+        "boom": Lambertian(albedo=ANTENNA_ALBEDO),
+    }
+
+
+def build(panel_pitch_deg: float = 12.0, **surface) -> Scene:
     """The TOPEX/Poseidon scene.
 
     Parameters
     ----------
-    panel_pitch_deg : float, solar-array pitch about the boom axis (articulation parameter).
-    materials : dict, optional, replacement BRDFs by material name (see :data:`MATERIALS`).
+    panel_pitch_deg : float
+        Solar-array pitch about body +y (the articulation parameter); the published fits put the
+        array normal 10-12 deg from body x.
+    **surface : float
+        Surface parameters (`SURFACE_PARAMETERS`); the rest take their defaults.
     """
-    brdfs = {**MATERIALS, **(materials or {})}
-    width_x, depth_y, height_z = ENVELOPE_M
-    # Instrument module (lower, full width) and multimission bus (upper, narrower).
-    module = Part.box(
-        "instrument_module",
-        (width_x, depth_y, 3.4),
-        "mli_foil",
-        center_m=(0.0, 0.0, -1.6),
-        face_materials={"+x": "radiator"},
+    x_m, y_m, z_m = BUS_SIZE_M
+    bus = Part.box("bus", BUS_SIZE_M, "bus")
+    altimeter = Part.dish("altimeter", ALTIMETER_DIAMETER_M, ALTIMETER_DEPTH_M, "antenna").transformed(
+        offset_m=(0.0, 0.0, z_m / 2.0)
     )
-    bus = Part.box(
-        "bus", (2.8, depth_y, 3.2), "mli_foil", center_m=(-1.35, 0.0, 1.7), face_materials={"-x": "radiator"}
+    boom = Part.box("hga_boom", (0.08, 0.08, HGA_BOOM_M), "boom", center_m=(0.0, 0.0, -z_m / 2.0 - HGA_BOOM_M / 2.0))
+    # The dish opens toward -z (zenith, toward TDRSS): the +z-opening dish turned about x.
+    flip = ((1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, -1.0))
+    hga = Part.dish("hga", HGA_DIAMETER_M, HGA_DEPTH_M, "antenna").transformed(
+        rotation=flip, offset_m=(0.0, 0.0, -z_m / 2.0 - HGA_BOOM_M)
     )
-    mast = Part.box("mast", (0.15, 0.15, 1.0), "boom", center_m=(-1.35, 0.0, 3.3 + 0.5))
-    dish = Part.dish("antenna", 1.5, 0.25, "antenna").transformed(offset_m=(-1.35, 0.0, 4.3))
-    boom_root = np.array([-1.35, depth_y / 2.0, 2.4])
-    boom = Part.box("boom", (0.1, BOOM_LENGTH_M, 0.1), "boom", center_m=boom_root + [0.0, BOOM_LENGTH_M / 2.0, 0.0])
     length, width = ARRAY_SIZE_M
+    inner = -y_m / 2.0 - YOKE_M
+    yoke = Part.box("yoke", (0.1, YOKE_M, 0.1), "boom", center_m=(0.0, -y_m / 2.0 - YOKE_M / 2.0, 0.0))
     array = Part.box(
         "solar_array",
         (ARRAY_THICKNESS_M, length, width),
         "array_back",
-        center_m=boom_root + [0.0, BOOM_LENGTH_M + length / 2.0, 0.0],
+        center_m=(0.0, inner - length / 2.0, 0.0),
         face_materials={"+x": "solar_cells"},
     )
     articulation = Articulation(
         part="solar_array",
         parameter="panel_pitch_deg",
-        axis_point_m=tuple(boom_root),
+        axis_point_m=(0.0, 0.0, 0.0),
         axis=(0.0, 1.0, 0.0),
         rest_deg=0.0,
     )
     return Scene.from_parts(
-        [module, bus, mast, dish, boom, array],
-        brdfs,
+        [bus, altimeter, boom, hga, yoke, array],
+        surface_brdfs(**surface),
         articulations=[articulation],
         parameters={"panel_pitch_deg": panel_pitch_deg},
         name="topex",
