@@ -22,18 +22,18 @@ from rsodb.report.period_report import build_period_report
 
 __all__ = ["run_pipeline", "quick_fit_configs", "QUICK_FIT", "QUICK_SPIN_AXES"]
 
-# A first look that keeps the bundled samples within a few minutes on two cores: at most 50
-# samples per pass, no exposure sub-samples, a global search on 40 samples whose final
+# A first look that keeps the bundled samples within a few minutes on two cores. The likelihood
+# sees at most 120 samples per pass, chosen without a stride (bins of consecutive samples where
+# they turn the body little, then contiguous windows each a cycle long spread over the pass;
+# rsodb.fit.selection), with no exposure sub-samples; a global search on 40 samples whose final
 # population seeds the walkers (spread over the good modes), differential-evolution moves that
-# let walkers jump between modes, and a short chain: ~3500 evaluations of the forward model per
-# pass, each costing the shape's cached renderer (~0.1-0.3 ms per direction pair on this
-# machine) times the samples. On the bundled samples it lands near the TOPEX truths; COSMOS
-# 2502's glint-dominated curves sometimes need the full fit (30 generations and 80 steps found
-# every truth but took twice as long).
+# let walkers jump between modes, and a short chain. Residuals, their RMS and the model curve
+# still cover every sample of the pass. The quick fit says when its chain has not converged.
 QUICK_FIT = {
     "name": "quick",
+    "band_draws": 20,
     "model": {"n_sub": 1},
-    "data": {"max_points": 50},
+    "data": {"max_points": 120},
     "sampler": {
         "n_walkers": 12,
         "n_steps": 60,

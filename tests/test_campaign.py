@@ -39,7 +39,7 @@ def archive(tmp_path_factory):
     archive = Archive(tmp_path_factory.mktemp("campaign") / "archive")
     passes = []
     for k, start_s in enumerate((0.0, 200.0)):
-        template = window(observed, start_s, 20.0, stride=4)
+        template = window(observed, start_s, 20.0, bin_size=4)
         model = FitProblem.build(template, FitConfig.from_dict(FIT)).posterior.model
         passes.append(inject(template, model, TRUTH, noise_mag=0.02, rng=np.random.default_rng(k)))
     archive.add(passes)

@@ -16,7 +16,7 @@ import numpy as np
 from rsodb.fit.likelihood import NormalisedLikelihood
 from rsodb.fit.sampler import read_chain
 
-__all__ = ["corner_figure", "lightcurve_figure", "trace_figure", "save_all"]
+__all__ = ["corner_figure", "lightcurve_figure", "prediction_figure", "trace_figure", "save_all"]
 
 
 def _figure(width_in: float, height_in: float):
@@ -65,38 +65,111 @@ def corner_figure(result, path=None, truths=None):
     return _saved(figure, path, dpi=80)
 
 
+def _draw_pass(top, bottom, samples, curve, jitter_mag: float, model_label: str) -> None:
+    """Observed samples of a pass (a `PassCurve`-like object), the model curve and band, the
+    fitted window shaded, and every sample's residual."""
+    start = samples.time_utc[0]
+    t = (samples.time_utc - start) / np.timedelta64(1, "s")
+    window, fitted = samples.in_window, samples.fitted
+    edges = t[window][[0, -1]]
+    for axis in (top, bottom):
+        axis.axvspan(*edges, color="C2", alpha=0.08, lw=0, label="fitted window" if axis is top else None)
+    inside = window & fitted
+    top.errorbar(
+        t[inside],
+        samples.mag_obs[inside],
+        samples.mag_err[inside],
+        fmt=".",
+        ms=3,
+        color="0.2",
+        elinewidth=0.4,
+        label="observed, fitted",
+    )
+    hollow = window & ~fitted
+    if hollow.any():
+        top.plot(
+            t[hollow],
+            samples.mag_obs[hollow],
+            "o",
+            ms=2.5,
+            mfc="none",
+            mec="0.35",
+            mew=0.5,
+            label="observed, in the window, not in the likelihood",
+        )
+    if (~window).any():
+        top.plot(t[~window], samples.mag_obs[~window], ".", ms=2, color="0.7", label="observed, outside the window")
+    if curve is not None:
+        ct = (curve.time_utc - start) / np.timedelta64(1, "s")
+        if curve.mag_band.size:
+            low, high = curve.band(0.025, 0.975)
+            top.fill_between(ct, low, high, color="C3", alpha=0.15, lw=0, label="model, 95% of posterior draws")
+            low, high = curve.band(0.16, 0.84)
+            top.fill_between(ct, low, high, color="C3", alpha=0.3, lw=0, label="model, 68%")
+        top.plot(ct, curve.mag_best, "-", lw=0.8, color="C3", label=model_label)
+    else:
+        top.plot(t, samples.mag_model, "-", lw=1.0, color="C3", label=f"{model_label}, at the samples")
+    top.invert_yaxis()
+    top.set_ylabel("magnitude")
+    top.legend(loc="best", fontsize=7)
+    sigma = np.hypot(samples.mag_err, jitter_mag)
+    bottom.axhline(0.0, color="0.5", lw=0.8)
+    bottom.fill_between(t, -sigma, sigma, color="C0", alpha=0.2, lw=0)
+    # Said in the title rather than a legend box, which would hide residuals.
+    bottom.set_title("residuals of every sample; shaded: 1 sigma (quoted errors + jitter)", fontsize=8, loc="left")
+    bottom.plot(t, samples.mag_obs - samples.mag_model, ".", ms=2, color="0.2")
+    bottom.invert_yaxis()
+    bottom.set_ylabel("obs - model [mag]")
+    bottom.set_xlabel(f"seconds since {str(start)[:23]} UTC")
+
+
 def lightcurve_figure(result, path=None):
-    """Observed magnitudes with errors, the best-fit synthetic curve, and the residuals."""
-    figure = _figure(10, 6)
+    """The whole pass: observed magnitudes, the model as a continuous curve with its posterior
+    band, the fitted window shaded, and the residuals of every sample.
+
+    Samples the likelihood saw are filled, other samples of the window hollow, samples outside
+    the window grey. The model curve is the stored fine-step curve (`FitResult.curve`), not the
+    model at the samples joined by lines, so a curve that swings between samples shows it.
+    """
+    figure = _figure(11, 6.5)
     top, bottom = figure.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [3, 1]})
-    t = result.t_s
     if result.likelihood == "normalised":
-        observed, model, _ = NormalisedLikelihood(result.mag_obs, result.mag_err).compared(result.mag_model)
+        window = result.in_window
+        t = result.t_s[window]
+        observed, model, _ = NormalisedLikelihood(result.mag_obs[window], result.mag_err[window]).compared(
+            result.mag_model[window]
+        )
         top.plot(t, observed, ".", ms=3, color="0.3", label="observed (normalised)")
         top.plot(t, model, "-", lw=1.2, color="C3", label="best fit (normalised)")
         top.set_ylabel("normalised brightness")
-        residual, sigma = observed - model, None
+        top.legend(loc="best", fontsize=8)
+        bottom.plot(t, observed - model, ".", ms=3, color="0.2")
+        bottom.set_ylabel("obs - model")
+        bottom.set_xlabel(f"seconds since {str(result.time_utc[0])[:23]} UTC")
     else:
-        top.errorbar(t, result.mag_obs, result.mag_err, fmt=".", ms=3, color="0.3", elinewidth=0.5, label="observed")
-        top.plot(t, result.mag_model, "-", lw=1.2, color="C3", label=f"best fit (offset {result.offset_mag:+.2f} mag)")
-        top.invert_yaxis()
-        top.set_ylabel("magnitude")
-        residual, sigma = result.residuals_mag, np.hypot(result.mag_err, result.jitter_mag)
-    top.legend(loc="best", fontsize=8)
+        _draw_pass(
+            top, bottom, result, result.curve, result.jitter_mag, f"best fit (offset {result.offset_mag:+.2f} mag)"
+        )
     top.set_title(
-        f"{result.pass_id}  fit {result.name!r}: residual RMS {result.residual_rms_mag:.3f} mag, "
-        f"reduced chi2 {result.reduced_chi2:.2f}",
+        f"{result.pass_id}  fit {result.name!r}: residual RMS {result.residual_rms_mag:.3f} mag over all "
+        f"{result.n_window} samples of the window, reduced chi2 {result.reduced_chi2:.2f}",
         fontsize=10,
     )
-    bottom.axhline(0.0, color="0.5", lw=0.8)
-    if sigma is not None:
-        bottom.fill_between(t, -sigma, sigma, color="C0", alpha=0.2, lw=0)
-        # Said in the title rather than a legend box, which would hide residuals.
-        bottom.set_title("residuals; shaded: 1 sigma (quoted errors + jitter)", fontsize=8, loc="left")
-    bottom.plot(t, residual, ".", ms=3, color="0.2")
-    bottom.invert_yaxis()
-    bottom.set_ylabel("obs - model [mag]" if sigma is not None else "obs - model")
-    bottom.set_xlabel(f"seconds since {str(result.time_utc[0])[:23]} UTC")
+    return _saved(figure, path)
+
+
+def prediction_figure(prediction, path=None):
+    """A stored fit replayed (`rsodb.fit.prediction.FitPrediction`): the posterior median over the
+    whole pass with the band of its posterior draws, and every sample's residual."""
+    result = prediction.result
+    figure = _figure(11, 6.5)
+    top, bottom = figure.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [3, 1]})
+    _draw_pass(top, bottom, prediction.samples, prediction.curve, result.jitter_mag, "posterior median")
+    top.set_title(
+        f"{result.pass_id}  fit {result.name!r} replayed: posterior median and {prediction.draws} draws; "
+        f"residual RMS {prediction.residual_rms_mag:.3f} mag over the window",
+        fontsize=10,
+    )
     return _saved(figure, path)
 
 
