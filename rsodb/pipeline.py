@@ -108,12 +108,14 @@ def run_pipeline(
 
     rows = archive.catalog()
     norads = sorted({row.norad for row in rows})
+    failures = {}
     if fit and rows:
         outcomes = _fit_all(archive, rows, fit_config, fit_name, workers, progress)
         for outcome in outcomes:
             log(outcome.summary())
             for pass_id, error in outcome.failed:
                 log(f"  {pass_id}: fit failed: {error}")
+                failures[pass_id] = error
         fit_name = outcomes[0].name
         summary["fits"] = [outcome.to_dict() for outcome in outcomes]
 
@@ -135,7 +137,7 @@ def run_pipeline(
                 )
             except ValueError as error:
                 log(f"object {norad}: no fit report ({error})")
-    index = build_index(archive, written, fit_name if fit and rows else None).write(out_dir / "index.html")
+    index = build_index(archive, written, fit_name if fit and rows else None, failures).write(out_dir / "index.html")
     summary["reports"] = [str(path) for _, _, path in written]
     summary["index"] = str(index)
     summary["elapsed_s"] = time.perf_counter() - started

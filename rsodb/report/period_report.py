@@ -23,7 +23,7 @@ import numpy as np
 from rsodb.campaign.period_survey import load_period_results
 from rsodb.periods.lightcurve import LightCurve
 from rsodb.periods.trend import trend_from_results
-from rsodb.plotting import file_pyplot
+from rsodb.plotting import file_pyplot, magnitude_label
 from rsodb.report.html import Document, Heading, Paragraph, Raw, Table, anchor, figure_from_matplotlib
 
 __all__ = [
@@ -124,7 +124,7 @@ def pass_figure(result, lightcurve):
         folded = lightcurve.replace(mag=detrended).fold(result.best_period_s, epoch_s=model.axis.t_mid_s)
         phase = np.linspace(0, 1, 400)
         folded.plot(ax_fold, model=(phase, model.phase_curve_mag(phase)), s=2)
-        ax_fold.set_ylabel("magnitude - trend")
+        ax_fold.set_ylabel(magnitude_label(lightcurve.band, lightcurve.mag_convention, detrended=True))
         ax_fold.set_title("")
     else:
         ax_fold.text(0.5, 0.5, "no period", ha="center", va="center", transform=ax_fold.transAxes)
