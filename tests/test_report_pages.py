@@ -21,7 +21,12 @@ def fake_fit(converged=True, flags=(), curve=(9.8216, 9.8210, 9.8222), fixed=Non
     median, p16, p84 = curve
     return SimpleNamespace(
         converged=converged,
-        verdict="converged: the kept chain is 80 autocorrelation times long. acceptance 0.3",
+        verdict=(
+            "converged: the kept chain is 80 autocorrelation times long. acceptance 0.3"
+            if converged
+            else "not converged: the kept chain is only 9.1 autocorrelation times long (50 wanted; tau = 3 steps); "
+            "mean acceptance 0.07 is outside 0.15-0.7"
+        ),
         flags=tuple(flags),
         reduced_chi2=reduced_chi2,
         names=("spin_period_s", "precession_angle_deg"),
@@ -48,7 +53,7 @@ def test_a_converged_fit_that_agrees_with_a_confident_period_is_trusted():
 @pytest.mark.parametrize(
     ("fit", "period", "level", "reason"),
     [
-        (fake_fit(converged=False), fake_period(), "low", "chain not converged (converged: the kept chain"),
+        (fake_fit(converged=False), fake_period(), "low", "chain not converged (9.1 autocorrelation times, 50 wanted)"),
         (fake_fit(flags=("model misfit: residuals ...",), reduced_chi2=7.3), fake_period(), "low", "reduced chi2 7.3"),
         (fake_fit(flags=("stuck walkers: 3 of 12",)), fake_period(), "medium", "stuck walkers"),
         (fake_fit(), fake_period("ambiguous harmonic"), "medium", "period search 'ambiguous harmonic'"),

@@ -9,6 +9,7 @@ worker processes and threads) and saves it when given a path.
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 import textwrap
 
@@ -20,11 +21,11 @@ from rsodb.fit.sampler import read_chain
 __all__ = ["corner_figure", "lightcurve_figure", "prediction_figure", "trace_figure", "save_all"]
 
 
-def _figure(width_in: float, height_in: float):
+def _figure(width_in: float, height_in: float, layout: str | None = "constrained"):
     # matplotlib loads in about a second; only drawing needs it.
     from matplotlib.figure import Figure
 
-    return Figure(figsize=(width_in, height_in), layout="constrained")
+    return Figure(figsize=(width_in, height_in), layout=layout)
 
 
 def _saved(figure, path, dpi: int = 110):
@@ -49,8 +50,30 @@ def corner_figure(result, path=None, truths=None):
     import corner
 
     ndim = len(result.names)
-    figure = _figure(1.5 * ndim + 1, 1.5 * ndim + 1)
+    # No layout engine: corner places its panels itself (subplots_adjust), which a constrained
+    # layout would refuse with a warning.
+    figure = _figure(1.5 * ndim + 1, 1.5 * ndim + 1, layout=None)
     marks = None if truths is None else [truths.get(n) for n in result.names]
+    quiet = _WithoutContourWarnings()
+    logging.getLogger().addFilter(quiet)
+    try:
+        _corner(corner, result, figure, marks)
+    finally:
+        logging.getLogger().removeFilter(quiet)
+    figure.suptitle(f"{result.pass_id}: posterior of fit {result.name!r}", fontsize=10)
+    return _saved(figure, path, dpi=80)
+
+
+class _WithoutContourWarnings(logging.Filter):
+    """Drops corner's root-logger warning for a panel whose draws are too concentrated for
+    contours (a clump of a short chain): the panel shows the draws anyway, and the warning
+    would be printed once per panel per fit."""
+
+    def filter(self, record) -> bool:
+        return "Too few points to create valid contours" not in record.getMessage()
+
+
+def _corner(corner, result, figure, marks) -> None:
     corner.corner(
         np.asarray(result.samples),
         fig=figure,
@@ -67,8 +90,6 @@ def corner_figure(result, path=None, truths=None):
     )
     for axis in figure.axes:
         axis.tick_params(labelsize=7)
-    figure.suptitle(f"{result.pass_id}: posterior of fit {result.name!r}", fontsize=10)
-    return _saved(figure, path, dpi=80)
 
 
 def _draw_pass(top, bottom, samples, curve, jitter_mag: float, model_label: str, mag_label: str) -> None:

@@ -380,7 +380,7 @@ class FoldedLightCurve:
         options = {"s": 3, "c": self.cycle, "cmap": "viridis", "lw": 0} | style
         points = ax.scatter(self.phase, self.mag, **options)
         if "c" not in style and self.cycle.size and self.cycle.max() > self.cycle.min():
-            ax.figure.colorbar(points, ax=ax, label="cycle since the first sample", pad=0.01)
+            ax.figure.colorbar(points, ax=ax, label="cycle (0: the one starting at the fold's epoch)", pad=0.01)
         if model is not None:
             phase, mag = model
             ax.plot(phase, mag, color="C3", lw=1.2)

@@ -91,7 +91,7 @@ def trend_figure(results, trend=None):
 def pass_figure(result, lightcurve):
     """Three panels for one pass: light curve with model, periodogram, folded curve."""
     plt = file_pyplot()
-    fig = plt.figure(figsize=(12, 6.5))
+    fig = plt.figure(figsize=(12, 6.5), layout="constrained")
     grid = fig.add_gridspec(2, 2, height_ratios=(1, 1.1))
     ax_curve = fig.add_subplot(grid[0, :])
     ax_power = fig.add_subplot(grid[1, 0])
@@ -129,7 +129,6 @@ def pass_figure(result, lightcurve):
     else:
         ax_fold.text(0.5, 0.5, "no period", ha="center", va="center", transform=ax_fold.transAxes)
         ax_fold.set_axis_off()
-    fig.tight_layout()
     return fig
 
 

@@ -12,6 +12,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import math
+import re
+
+from rsodb.fit.result import MIN_AUTOCORR_LENGTHS
 
 __all__ = ["Trust", "assess", "LEVELS", "AGREEMENT_SIGMA"]
 
@@ -55,7 +58,7 @@ def assess(fit, period=None, *, missing: str = "not fitted") -> Trust:
     level, reasons = "high", []
     if not fit.converged:
         level = _lower(level, "low")
-        reasons.append("chain not converged (" + fit.verdict.split(". ")[0].rstrip(".") + ")")
+        reasons.append(_not_converged(fit.verdict))
     for flag in fit.flags:
         kind = flag.split(":")[0]
         if kind == "model misfit":
@@ -75,6 +78,15 @@ def assess(fit, period=None, *, missing: str = "not fitted") -> Trust:
         level = _lower(level, "medium")
         reasons.append(disagreement)
     return Trust(level, tuple(reasons))
+
+
+def _not_converged(verdict: str) -> str:
+    """The convergence verdict's first problem, shortened for a table cell."""
+    lengths = re.search(r"only ([\d.]+) autocorrelation times long", verdict)
+    if lengths:
+        return f"chain not converged ({lengths.group(1)} autocorrelation times, {MIN_AUTOCORR_LENGTHS} wanted)"
+    first = verdict.split(". ")[0].split("; ")[0]
+    return "chain not converged (" + first.removeprefix("not converged: ").rstrip(".") + ")"
 
 
 def _period_disagreement(fit, period) -> str:
