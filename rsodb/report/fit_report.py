@@ -200,9 +200,14 @@ def build_campaign_report(
     rows = archive.catalog(norad, band)
     results = load_fits(archive, norad, name, band)
     if not results:
+        others = sorted({n for row in rows for n in archive.result_names(row.pass_id, "fits")})
+        fix = (
+            f"its fits are named {', '.join(map(repr, others))}: give --name {others[0]}"
+            if others
+            else f"run 'rsodb campaign --archive {archive.path} --object {norad}' first"
+        )
         raise ValueError(
-            f"object {norad} has no fits named {name!r} in {str(archive.path)!r} ({len(rows)} passes stored); "
-            f"run 'rsodb campaign --archive {archive.path} --object {norad}' first"
+            f"object {norad} has no fits named {name!r} in {str(archive.path)!r} ({len(rows)} passes stored); {fix}"
         )
     periods = load_period_results(archive, norad, periods_name, band)
     periods_by_id = {p.pass_id: p for p in periods}
