@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+import re
 
 import pytest
 
@@ -78,7 +79,17 @@ def test_pipeline_on_the_samples_writes_reports_and_fits_near_the_truth(tmp_path
     for name in ("22076_periods.html", "22076_fits.html", "40358_periods.html", "40358_fits.html"):
         assert (reports / name).stat().st_size > 10_000, name
         assert f'href="{name}"' in page
-    assert page.count("<tr>") == 1 + 5  # the header and one row per pass
+    assert len(re.findall(r"<tr[ >]", page)) == 1 + 5  # the header and one row per pass
+    # Every pass has a trust level, and each fits page a corner and a trace plot per pass.
+    assert len(re.findall(r'<tr class="trust-(high|medium|low)">', page)) == 5
+    for norad, passes in ((22076, 2), (40358, 3)):
+        fits_page = (reports / f"{norad}_fits.html").read_text()
+        assert fits_page.count("Posterior of the free parameters") == passes
+        assert fits_page.count("Every walker's trace") == passes
+        assert fits_page.count("Trust: ") == passes
+    # The fits are stored as "quick": the report command says so instead of "run a campaign".
+    assert main(["report", "campaign", "--archive", str(tmp_path / "archive"), "--object", "22076"]) != 0
+    assert "give --name quick" in capsys.readouterr().err
 
     archive = Archive(tmp_path / "archive", create=False)
     for row in archive.summaries():

@@ -114,7 +114,9 @@ def _client(scheduler: str | None, n_workers: int | None):
         n_workers=n_workers or default_processes(),
         threads_per_worker=1,
         processes=True,
-        dashboard_address=None,
+        # A random free port: None does not disable the dashboard (dask/distributed#8136) and
+        # warns whenever another cluster holds the default 8787.
+        dashboard_address=":0",
         silence_logs=40,
     )
     return Client(cluster), cluster

@@ -83,7 +83,8 @@ REPORT_KINDS = {
         _periods_report,
     ),
     "campaign": (
-        "spin-state fits of one object: parameters against date, fitted vs periodogram periods",
+        "spin-state fits of one object: per pass the spin state with intervals and a trust level, the "
+        "posterior band over the pass, corner, trace and periodogram; parameters against date",
         CAMPAIGN_EXAMPLE,
         _campaign_arguments,
         _campaign_report,
