@@ -1,11 +1,12 @@
 """Every command the README and docs show runs as written.
 
-Each line beginning with ``rsodb `` inside a ```bash fence of README.md or docs/*.md runs in a
-shell, in order within its file, in a directory laid out as the docs assume: the repository's
-``data_samples/`` and ``configs/``, ``../shared/data`` beside it, an ``archive`` of the samples and
-of the real TOPEX pass with its periods stored, and a ``fit.toml`` (a short fit, so the fitting
-examples finish in seconds; what they show is the command, not the result). A line that is
-covered by a longer test says so in a comment ``# tested by tests/...`` and is skipped here.
+Each line beginning with ``rsodb `` inside a ```bash fence of README.md or docs/*.md, and each
+```rsodb ...``` example in a table row, runs in a shell, in order within its file, in a
+directory laid out as the docs assume: the repository's ``data_samples/``, ``../shared/data``
+beside it, an ``archive`` of the samples and of the real TOPEX pass with its periods stored, and
+``configs/`` and a ``fit.toml`` with the repository's fit settings but a sampler of a few steps
+(what the examples show is the command, not the result). Commands that a longer test already
+runs as written are listed in `COVERED` and skipped here.
 """
 
 from __future__ import annotations
@@ -15,32 +16,37 @@ from pathlib import Path
 import re
 import shutil
 import subprocess
+import tomllib
 
 import pytest
 
 from rsodb.archive import Archive
 from rsodb.campaign.period_survey import survey_periods
+from rsodb.fit.config import FitConfig
+from rsodb.fit.runner import FitProblem, load_periods, shape_store_for
 from tests.conftest import PROJECT_ROOT, TOPEX_PHV
 
 DOCS = [PROJECT_ROOT / "README.md", *sorted((PROJECT_ROOT / "docs").glob("*.md"))]
 FENCE = re.compile(r"^```(\w*)\s*$")
+INLINE = re.compile(r"`(rsodb [^`]+)`")
 # A fit short enough for an example: the commands are under test here, not the fit's result.
-EXAMPLE_FIT = """name = "default"
-[data]
-max_points = 40
-[sampler]
-n_walkers = 10
-n_steps = 12
-search_popsize = 6
-search_maxiter = 3
-search_points = 30
-seed = 0
-"""
+SHORT_SAMPLER = {
+    "n_steps": 8,
+    "search_popsize": 5,
+    "search_maxiter": 2,
+    "search_points": 30,
+}
+SHORT_DATA = {"max_points": 40}
+# Commands another test runs exactly as the docs show them.
+COVERED = {
+    "rsodb pipeline data_samples --archive archive --out reports": "tests/test_pipeline_samples.py",
+}
 SECONDS_PER_COMMAND = 600
 
 
 def shown_commands(path: Path) -> list[tuple[int, str]]:
-    """(line number, command) of every ``rsodb`` line inside a bash fence of `path`."""
+    """(line number, command) of every ``rsodb`` line inside a bash fence of `path`, and of every
+    inline ```rsodb ...``` in a table row."""
     commands, language = [], None
     for number, line in enumerate(path.read_text().splitlines(), start=1):
         fence = FENCE.match(line.strip())
@@ -49,13 +55,54 @@ def shown_commands(path: Path) -> list[tuple[int, str]]:
             continue
         if language in ("bash", "sh", "console") and line.strip().startswith("rsodb "):
             commands.append((number, line.strip()))
+        elif language is None and line.startswith("|"):
+            commands.extend((number, command) for command in INLINE.findall(line))
     return commands
+
+
+def _toml(record: dict, prefix: str = "") -> str:
+    """A TOML text of a configuration record (tables, strings, numbers, booleans, inline tables)."""
+
+    def value(v):
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, str):
+            return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+        if isinstance(v, dict):
+            return "{ " + ", ".join(f"{k} = {value(x)}" for k, x in v.items()) + " }"
+        if isinstance(v, list):
+            return "[" + ", ".join(value(x) for x in v) + "]"
+        return repr(v)
+
+    lines = [f"{k} = {value(v)}" for k, v in record.items() if not isinstance(v, dict)]
+    for k, v in record.items():
+        if isinstance(v, dict):
+            lines += ["", f"[{prefix}{k}]", _toml(v, f"{prefix}{k}.")]
+    return "\n".join(lines)
+
+
+def short_config(path: Path) -> str:
+    """The fit configuration of `path` with a sampler of a few steps and few samples."""
+    record = tomllib.loads(path.read_text())
+    record["sampler"] = {**record.get("sampler", {}), **SHORT_SAMPLER}
+    record["data"] = {**record.get("data", {}), **SHORT_DATA}
+    return _toml(record)
 
 
 def test_the_docs_show_commands():
     shown = {path.name: shown_commands(path) for path in DOCS}
-    assert len(shown["README.md"]) >= 1
-    assert sum(map(len, shown.values())) >= 10, shown
+    assert len(shown["README.md"]) >= 12  # the command table and the main job
+    assert sum(map(len, shown.values())) >= 30, shown
+
+
+def test_short_configs_keep_every_other_setting():
+    for config in (PROJECT_ROOT / "configs").glob("*.toml"):
+        original = tomllib.loads(config.read_text())
+        short = tomllib.loads(short_config(config))
+        assert short["sampler"]["n_steps"] == SHORT_SAMPLER["n_steps"]
+        assert {k: v for k, v in short.items() if k not in ("sampler", "data")} == {
+            k: v for k, v in original.items() if k not in ("sampler", "data")
+        }, config.name
 
 
 @pytest.mark.parametrize("path", DOCS, ids=[p.name for p in DOCS])
@@ -71,21 +118,27 @@ def workdir(tmp_path_factory, shared_data):
     """The directory the docs' commands run in (see the module docstring)."""
     root = tmp_path_factory.mktemp("docs")
     work = root / "project"
-    work.mkdir()
-    for name in ("data_samples", "configs"):
-        (work / name).symlink_to(PROJECT_ROOT / name)
+    (work / "configs").mkdir(parents=True)
+    (work / "data_samples").symlink_to(PROJECT_ROOT / "data_samples")
     (root / "shared").symlink_to(shared_data.parent)
+    for config in (PROJECT_ROOT / "configs").glob("*.toml"):
+        (work / "configs" / config.name).write_text(short_config(config))
+    (work / "fit.toml").write_text(short_config(PROJECT_ROOT / "configs" / "short.toml"))
     archive = Archive(work / "archive")
     archive.ingest([PROJECT_ROOT / "data_samples", TOPEX_PHV], progress=False)
     survey_periods(archive, processes=1, progress=False)
-    (work / "fit.toml").write_text(EXAMPLE_FIT)
+    # The shape caches every file's fits share, built once here rather than once per file.
+    config = FitConfig.from_toml(work / "fit.toml")
+    for norad in (22076, 40358):
+        stored = archive.passes(norad=norad)[0]
+        FitProblem.build(stored, config, load_periods(archive, stored.pass_id), store=shape_store_for(archive))
     return work
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("path", DOCS, ids=[p.name for p in DOCS])
 def test_shown_commands_run(path, workdir, tmp_path):
-    commands = [(n, c) for n, c in shown_commands(path) if "# tested by tests/" not in c]
+    commands = [(n, c) for n, c in shown_commands(path) if c.split("  #")[0].strip() not in COVERED]
     if not commands:
         pytest.skip(f"{path.name} shows no command to run here")
     # Each file runs in its own copy, so one file's commands cannot depend on another's.
