@@ -19,13 +19,21 @@ bench/record.py (docs/benchmarks/history.jsonl, docs/benchmarks.md), with the re
 for the chart. The machine is shared: wall times are under load from other
 jobs; CPU times of this process are printed beside them.
 
+``--scenes`` runs the other comparison instead: the scenes and frame sets of
+raycast.cycles.comparison (plate, bus with wings, cylinder, the paper's mesh with its own, all
+Diffuse and all Glossy materials; tumble and hard frames) with converged Cycles as the reference,
+Cycles at lower settings, the direct renderer at several pixel sizes and the fast path, in one
+run (chart docs/img/render_cycles_scenes.png; recorded as the "render_scenes" benchmark).
+
 Run: ``python bench/render.py`` (add ``--no-cycles`` to skip Blender, ``--quick`` for a smoke run,
-``--chart-only`` to redraw the chart from the last recorded run).
+``--chart-only`` to redraw the chart from the last recorded run);
+``python bench/render.py --scenes [names] [--tumble-stride 5 --per-kind 3 --no-cache names]``.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 from pathlib import Path
 import resource
@@ -40,7 +48,6 @@ sys.path.insert(0, str(ROOT))
 from bench.record import command, figure, latest, record, today  # noqa: E402
 from raycast.geometry.attitude import PrecessingSpin  # noqa: E402
 from raycast.models import topex  # noqa: E402
-from raycast.renderer.brdf import GGX, Lambertian, Principled  # noqa: E402
 from raycast.renderer.cache import SceneCache  # noqa: E402
 from raycast.renderer.direct import DirectRenderer  # noqa: E402
 from raycast.renderer.scene import Scene  # noqa: E402
@@ -49,6 +56,7 @@ SHARED = (ROOT / ".." / "shared" / "data").resolve()
 TOPEX_PHV = SHARED / "observations" / "result_22076_20240730_UT212240.phV"
 MODELS = SHARED / "models"
 CHART = ROOT / "docs" / "img" / "render_speed_accuracy.png"
+SCENES_CHART = ROOT / "docs" / "img" / "render_cycles_scenes.png"
 
 ATTITUDES = {
     "TOPEX": PrecessingSpin(period_s=9.86, precession_period_s=689.0, precession_angle_deg=35.0, spin_axis="z"),
@@ -99,42 +107,6 @@ def timed(function, repeats=1):
         walls.append(time.perf_counter() - wall)
         cpus.append(time.process_time() - cpu)
     return result, float(np.median(walls)), float(np.median(cpus))
-
-
-def cycles_mesh(scene):
-    """The scene as a raycast.cycles.CyclesMesh with the same BRDF parameters."""
-    from raycast.cycles.runner import CyclesMesh
-
-    records = []
-    for brdf in scene.brdfs:
-        if isinstance(brdf, Lambertian):
-            records.append({"blender_node": "Diffuse BSDF", "color": [brdf.albedo] * 3})
-        elif isinstance(brdf, GGX):
-            records.append({"blender_node": "Glossy BSDF", "color": [brdf.color] * 3, "roughness": brdf.roughness})
-        elif isinstance(brdf, Principled):
-            records.append(
-                {
-                    "blender_node": "Principled BSDF",
-                    "base_color": [brdf.base_color] * 3,
-                    "metallic": brdf.metallic,
-                    "roughness": brdf.roughness,
-                    "specular_ior_level": brdf.specular_ior_level,
-                    "ior": brdf.ior,
-                }
-            )
-        else:
-            raise TypeError(f"no Cycles node for {brdf!r}")
-    mesh = scene.posed()
-    vertices = mesh.vertices_m
-    triangles = np.arange(len(vertices)).reshape(-1, 3)
-    return CyclesMesh.from_arrays(
-        vertices,
-        triangles,
-        records,
-        material_index=mesh.material_index,
-        corner_normals=mesh.corner_normals,
-        material_names=scene.material_names,
-    )
 
 
 def bench_model(
@@ -209,10 +181,10 @@ def bench_model(
             flush=True,
         )
     if cycles_samples:
-        from raycast.cycles.runner import CyclesSettings, render_cycles
+        from raycast.cycles.runner import CyclesMesh, CyclesSettings, render_cycles
 
         subset = np.linspace(0, n - 1, cycles_frames).astype(int)
-        mesh = cycles_mesh(scene)
+        mesh = CyclesMesh.from_scene(scene)
         for samples in cycles_samples:
             result = render_cycles(mesh, sun[subset], obs[subset], CyclesSettings(samples=samples), progress=False)
             per_frame = result.seconds_per_frame
@@ -426,6 +398,273 @@ def recorded_results():
     return [{k: float("nan") if v is None else v for k, v in row.items()} for row in run["data"]]
 
 
+# ------------------------------------------------------------------------------------------
+# The comparison scenes against Cycles (--scenes): raycast.cycles.comparison
+
+# Cycles' reference on the comparison scenes (issue 14: 256^2 x 16 converged to ~1e-3 mag on
+# tumble frames, 384^2 x 32 confirmed it); two passes give its own noise estimate.
+REFERENCE_CYCLES = (256, 16)
+# Cycles at lower settings, timed against that reference in the same run: (resolution, samples).
+CYCLES_LADDER = ((64, 4), (128, 4), (128, 16))
+# The direct renderer's pixel sizes as fractions of the mesh radius.
+DIRECT_PIXELS_PER_RADIUS = (75, 150, 300)
+
+
+def scene_rows(comparison, tumble_stride, per_kind, with_cache, with_cycles=True, seed=0):
+    """Result rows of one comparison scene: Cycles at its reference and ladder settings, the
+    direct renderer at several pixel sizes, the fast path (if ``with_cache``), each on the
+    tumble frames (Cycles on every ``tumble_stride``-th) and the hard frames. Without Cycles
+    the reference is the direct renderer at its finest pixel size and only the fast path is
+    compared with it."""
+    import tracemalloc
+
+    from raycast.cycles.comparison import hard_frames, mag_difference, tumble_frames
+    from raycast.cycles.runner import CyclesSettings, render_cycles
+
+    name, scene = comparison.name, comparison.scene
+    tumble = tumble_frames(150)
+    frame_sets = {
+        "tumble": tumble.subset(np.arange(0, 150, tumble_stride)),
+        "hard": hard_frames(comparison, per_kind, seed),
+    }
+    print(f"\n{name}: {len(frame_sets['tumble'])} tumble and {len(frame_sets['hard'])} hard frames", flush=True)
+    rows, references = [], {}
+
+    def row(method, setting, frames, delta, cpu_s, wall_s, **extra):
+        lit = delta[np.isfinite(delta)]
+        rows.append(
+            dict(
+                scene=name,
+                frames=frames,
+                method=method,
+                setting=setting,
+                rms_mag=float(np.sqrt(np.mean(lit**2))) if lit.size else float("nan"),
+                max_mag=float(np.max(np.abs(lit))) if lit.size else float("nan"),
+                cpu_s=cpu_s,
+                wall_s=wall_s,
+                **extra,
+            )
+        )
+        r = rows[-1]
+        print(
+            f"  {frames:6s} {method:7s} {setting:24s} RMS {r['rms_mag']:.4f} max {r['max_mag']:.4f} mag, "
+            f"{r['cpu_s']:.3f} s CPU per 150 frames",
+            flush=True,
+        )
+
+    radius = scene.posed().radius_m
+    for frames, fs in frame_sets.items():
+        if not with_cycles:
+            finest = DirectRenderer(scene, radius / DIRECT_PIXELS_PER_RADIUS[-1], sampling="raster")
+            references[frames] = finest.intensity(fs.sun_body, fs.obs_body)
+            continue
+        resolution, samples = REFERENCE_CYCLES
+        settings = CyclesSettings(samples=samples, resolution=resolution, noise_passes=2)
+        reference = render_cycles(comparison.mesh, fs.sun_body, fs.obs_body, settings, progress=False)
+        references[frames] = reference.intensity_m2_sr
+        lit = reference.intensity_m2_sr > DARK_FRACTION * reference.intensity_m2_sr.max()
+        row(
+            "cycles-reference",
+            f"{resolution}^2 x {samples}",
+            frames,
+            np.where(lit, 1.0857 * np.abs(reference.noise_rel), np.nan),  # its standard error, mag
+            150 * reference.cpu_seconds_per_frame,
+            150 * reference.seconds_per_frame,
+        )
+        for resolution, samples in CYCLES_LADDER:
+            result = render_cycles(
+                comparison.mesh,
+                fs.sun_body,
+                fs.obs_body,
+                CyclesSettings(samples=samples, resolution=resolution),
+                progress=False,
+            )
+            row(
+                "cycles",
+                f"{resolution}^2 x {samples}",
+                frames,
+                mag_difference(result.intensity_m2_sr, reference.intensity_m2_sr),
+                150 * result.cpu_seconds_per_frame,
+                150 * result.seconds_per_frame,
+            )
+        for per_radius in DIRECT_PIXELS_PER_RADIUS:
+            renderer = DirectRenderer(scene, radius / per_radius, sampling="raster")
+            values, wall, cpu = timed(lambda: renderer.intensity(fs.sun_body, fs.obs_body))
+            row(
+                "direct",
+                f"pixel r/{per_radius}",
+                frames,
+                mag_difference(values, reference.intensity_m2_sr),
+                cpu * 150 / len(fs),
+                wall * 150 / len(fs),
+            )
+    if with_cache:
+        tracemalloc.start()
+        cache, build_wall, build_cpu = timed(lambda: SceneCache.build(scene))
+        peak_mb = tracemalloc.get_traced_memory()[1] / 1e6
+        tracemalloc.stop()
+        for frames, fs in frame_sets.items():
+            # Timed on all 150 tumble frames (a whole light curve); compared on Cycles' frames.
+            timing_frames = tumble if frames == "tumble" else fs
+            _, wall, cpu = timed(lambda: cache.intensity(timing_frames.sun_body, timing_frames.obs_body), repeats=5)
+            values = cache.intensity(fs.sun_body, fs.obs_body)
+            row(
+                "cached",
+                "grid 32",
+                frames,
+                mag_difference(values, references[frames]),
+                cpu * 150 / len(timing_frames),
+                wall * 150 / len(timing_frames),
+                build_s=build_cpu,
+                build_peak_mb=peak_mb,
+                tables_mb=cache.nbytes / 1e6,
+            )
+    return rows
+
+
+def scenes_chart(rows, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(dict.fromkeys(r["scene"] for r in rows))
+    fig, axes = plt.subplots(2, (len(names) + 1) // 2, figsize=(5 * ((len(names) + 1) // 2), 9), squeeze=False)
+    styles = {"direct": ("o", "C0"), "cached": ("s", "C2"), "cycles": ("^", "C3")}
+    for ax, name in zip(axes.ravel(), names):
+        for method, (marker, color) in styles.items():
+            for frames, line in (("tumble", "-"), ("hard", "--")):
+                mine = sorted(
+                    (r for r in rows if r["scene"] == name and r["method"] == method and r["frames"] == frames),
+                    key=lambda r: r["cpu_s"],
+                )
+                if mine:
+                    ax.loglog(
+                        [r["cpu_s"] for r in mine],
+                        [max(r["rms_mag"], 1e-4) for r in mine],
+                        marker + line,
+                        color=color,
+                        label=f"{method}, {frames} frames",
+                    )
+        ax.axhline(0.005, color="C0", lw=0.8, ls=":")
+        ax.axhline(0.02, color="C0", lw=0.8, ls="-.")
+        ax.set_title(name)
+        ax.set_xlabel("CPU per 150 frames [s]")
+        ax.set_ylabel(f"RMS vs Cycles {REFERENCE_CYCLES[0]}^2 x {REFERENCE_CYCLES[1]} [mag]")
+        ax.grid(True, which="both", alpha=0.3)
+    for ax in axes.ravel()[len(names) :]:
+        ax.set_visible(False)
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0.0, 0.06, 1.0, 1.0))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    print(f"chart written to {path}")
+
+
+def scenes_section(rows, load, stride, per_kind, with_cycles=True):
+    reference = (
+        f"Reference: Cycles {REFERENCE_CYCLES[0]}^2 px x {REFERENCE_CYCLES[1]} samples, object terminator "
+        f"offsets 0, direct light, box filter; its row gives its own standard error (two passes)."
+        if with_cycles
+        else f"Reference: the direct renderer at r/{DIRECT_PIXELS_PER_RADIUS[-1]} pixels (no Cycles in this run; "
+        f"the render_scenes benchmark compares that renderer with Cycles)."
+    )
+    title = "Renderers against Cycles on the comparison scenes" if with_cycles else "Fast path on the comparison scenes"
+    lines = [
+        f"## {title} ({today()}, bench/render.py --scenes)\n",
+        f"The scenes and frame sets of raycast.cycles.comparison: tumble frames (one 40 s spin, phase "
+        f"30-100 deg; compared on every {stride}th of 150) and hard frames ({per_kind} each backlit, glint and "
+        f"grazing). {reference} Errors are magnitudes against it over frames brighter than 1e-3 of the brightest. CPU "
+        f"per 150 frames: Cycles' CPU per frame x 150 (all its threads), the direct renderer's time on the "
+        f"set scaled to 150 frames, the fast path timed on all 150 tumble frames. Load average {load:.1f} "
+        f"at the start (shared 2-core machine).\n",
+        "| scene | frames | method | setting | RMS (mag) | max (mag) | CPU per 150 frames | fast-path build |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        build = (
+            f"{r['build_s']:.0f} s CPU, peak {r['build_peak_mb']:.0f} MB traced for {r['tables_mb']:.0f} MB tables"
+            if "build_s" in r
+            else ""
+        )
+        lines.append(
+            f"| {r['scene']} | {r['frames']} | {r['method']} | {r['setting']} | {r['rms_mag']:.4f} | "
+            f"{r['max_mag']:.4f} | {r['cpu_s']:.3f} s | {build} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def scenes_figures(rows):
+    """Per scene: the direct renderer's finest setting on both frame sets, its CPU ratio to Cycles
+    at equal accuracy on tumble frames, and the fast path."""
+    figures = []
+    for name in dict.fromkeys(r["scene"] for r in rows):
+        mine = [r for r in rows if r["scene"] == name]
+        direct = {r["frames"]: r for r in mine if r["method"] == "direct" and r["setting"].endswith("r/300")}
+        cached = {r["frames"]: r for r in mine if r["method"] == "cached"}
+        if cached:
+            c = cached["tumble"]
+            figures.append(
+                figure(
+                    f"{name} fast path",
+                    f"tumble {c['rms_mag']:.4f} RMS / {c['max_mag']:.4f} max mag, {1e3 * c['cpu_s']:.0f} ms CPU, "
+                    f"build peak {c['build_peak_mb']:.0f} MB for {c['tables_mb']:.0f} MB",
+                    "<= 0.01 mag, <= 20 ms, peak <= 3x tables",
+                )
+            )
+        if not direct:
+            continue
+        text = f"tumble {direct['tumble']['rms_mag']:.4f} / hard {direct['hard']['rms_mag']:.4f} mag RMS"
+        best = min(
+            (r for r in mine if r["method"] == "direct" and r["frames"] == "tumble" and r["rms_mag"] <= 0.005),
+            key=lambda r: r["cpu_s"],
+            default=None,
+        )
+        cycles = [dict(r, error_mag=r["rms_mag"]) for r in mine if r["method"] == "cycles" and r["frames"] == "tumble"]
+        if best is not None and cycles:
+            cycles_s, how = time_at_error(cycles, best["rms_mag"])
+            ratio = cycles_s / best["cpu_s"]
+            text += f"; {best['setting']} {ratio:.0f}x less CPU than Cycles at {best['rms_mag']:.4f} mag" + (
+                f" ({how})" if how else " (Cycles never as accurate: a lower bound)"
+            )
+        figures.append(figure(f"{name} direct vs Cycles", text, "<= 0.005 tumble, <= 0.02 hard, >= 20x"))
+    return figures
+
+
+def run_scenes(args, argv):
+    from raycast.cycles.comparison import comparison_scenes
+
+    names = tuple(args.scenes.split(",")) if args.scenes != "all" else None
+    comparisons = comparison_scenes(MODELS, *([names] if names else []))
+    load = os.getloadavg()[0]
+    # --partial keeps the rows of finished scenes in a JSON file, so a stopped run resumes.
+    partial = Path(args.partial) if args.partial else None
+    rows = json.loads(partial.read_text()) if partial and partial.exists() else []
+    done = {r["scene"] for r in rows}
+    for comparison in comparisons.values():
+        if comparison.name in done:
+            continue
+        rows += scene_rows(
+            comparison,
+            args.tumble_stride,
+            args.per_kind,
+            with_cache=comparison.name not in args.no_cache.split(","),
+            with_cycles=not args.no_cycles,
+        )
+        if partial:
+            partial.write_text(json.dumps(rows))
+    if args.quick:
+        return 0
+    if not args.no_cycles:
+        scenes_chart(rows, SCENES_CHART)
+    section = scenes_section(rows, load, args.tumble_stride, args.per_kind, not args.no_cycles)
+    print(section)
+    name = "render_scenes" if not args.no_cycles else "render_scenes_fast_path"
+    record(name, command("render.py", argv), scenes_figures(rows), section, data=rows)
+    return 0
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--no-cycles", action="store_true", help="skip Blender Cycles")
@@ -435,7 +674,19 @@ def main(argv=None):
         action="store_true",
         help="redraw the chart from the last recorded run (docs/benchmarks/history.jsonl); renders nothing",
     )
+    parser.add_argument(
+        "--scenes",
+        nargs="?",
+        const="all",
+        help="instead: the comparison scenes of raycast.cycles.comparison against Cycles (all, or names joined by commas)",
+    )
+    parser.add_argument("--tumble-stride", type=int, default=3, help="with --scenes: Cycles on every k-th tumble frame")
+    parser.add_argument("--per-kind", type=int, default=4, help="with --scenes: hard frames of each kind")
+    parser.add_argument("--no-cache", default="", help="with --scenes: scenes (joined by commas) without the fast path")
+    parser.add_argument("--partial", help="with --scenes: a JSON file of finished scenes' rows, read and extended")
     args = parser.parse_args(argv)
+    if args.scenes:
+        return run_scenes(args, argv)
     if args.chart_only:
         chart(recorded_results(), CHART)
         return 0

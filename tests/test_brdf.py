@@ -5,7 +5,15 @@ import math
 import numpy as np
 import pytest
 
-from raycast.renderer.brdf import GGX, Lambertian, Principled, directional_albedo, fresnel_dielectric
+from raycast.renderer import ggx_tables
+from raycast.renderer.brdf import (
+    GGX,
+    Lambertian,
+    Principled,
+    directional_albedo,
+    fresnel_dielectric,
+    valid_reflection_normal,
+)
 from tests.render_support import unit
 
 RNG = np.random.default_rng(20260730)
@@ -118,14 +126,67 @@ def test_fresnel_and_f0():
     assert Principled(0.5, ior=1.5, specular_ior_level=0.25).f0 == pytest.approx(0.02)
 
 
-def test_principled_diffuse_weight_from_specular_albedo():
-    # Dielectric F0 = 0.034: at normal view the rough specular lobe takes about F0 of the light
-    # (Fresnel rises off-specular, masking takes some back), so the diffuse weight lies in
-    # (0.95, 0.98); grazing views see much more specular.
+def test_principled_diffuse_weight_is_cycles_layering_weight():
+    # Cycles weighs the base by 1 - (F0 + (1 - F0) s(mu)), s the VNDF mean of the remapped
+    # Fresnel curve (raycast.renderer.ggx_tables), read at the view cosine. At normal view the
+    # rough lobe takes about F0 (0.034 at IOR 1.45); grazing views see much more specular.
     brdf = Principled(0.5, roughness=0.5, ior=1.45)
     weights = brdf.diffuse_weight(np.array([1.0, 0.5, 0.1]))
-    assert 0.95 < weights[0] < 0.98
-    assert weights[0] > weights[1] > weights[2] > 0.5
+    assert 0.95 < weights[0] < 0.97
+    assert weights[0] > weights[1] > weights[2] > 0.7
+    f0 = brdf.f0
+    s = ggx_tables.dielectric_fresnel_mean(0.5, np.array([0.18]), 1.45)
+    assert brdf.diffuse_weight(np.array([0.18]))[0] == pytest.approx(1.0 - (f0 + (1.0 - f0) * s[0]), rel=1e-12)
+    # Multiple scattering darkens the estimate by E + Fms (1 - E) < 1: a little more base.
+    multi = Principled(0.5, roughness=0.5, ior=1.45, distribution="MULTI_GGX")
+    assert (multi.diffuse_weight(np.array([1.0, 0.5, 0.1])) > weights).all()
+
+
+def test_specular_ior_level_takes_the_ior_of_the_scaled_f0():
+    # Cycles: F0 *= 2 level, then eta = ior_from_F0(F0); the lobe follows that eta's Fresnel curve.
+    brdf = Principled(0.5, ior=1.5, specular_ior_level=0.25)
+    assert brdf.f0 == pytest.approx(0.02)
+    assert ((brdf.eta - 1.0) / (brdf.eta + 1.0)) ** 2 == pytest.approx(0.02, rel=1e-12)
+    c = np.array([0.9, 0.5, 0.1])
+    np.testing.assert_allclose(brdf._fresnel(c), fresnel_dielectric(c, brdf.eta), rtol=1e-12)
+
+
+def test_ggx_tables_reproduce_cycles_integrals():
+    # Node values Cycles' precomputation gives (Monte Carlo, 2**23-2**26 samples each; read from
+    # its baked tables for docs/cycles.md): E(16/31, 1) 0.903873, E(1, 1) 0.306853,
+    # E(16/31, 16/31) 0.847421, E_avg(16/31) 0.870874, E_avg(1) 0.409137,
+    # s(8/15, 8/15, z 7/15) 0.034703. Our quadrature of the same integrals agrees to 1e-4
+    # (Cycles' own sampling noise is of that order).
+    assert ggx_tables.ggx_albedo(16 / 31, 1.0) == pytest.approx(0.903873, abs=1e-4)
+    assert ggx_tables.ggx_albedo(1.0, 1.0) == pytest.approx(0.306853, abs=1e-4)
+    assert ggx_tables.ggx_albedo(16 / 31, 16 / 31) == pytest.approx(0.847421, abs=1e-4)
+    assert ggx_tables.ggx_average_albedo(16 / 31) == pytest.approx(0.870874, abs=1e-4)
+    assert ggx_tables.ggx_average_albedo(1.0) == pytest.approx(0.409137, abs=1e-4)
+    eta = (1 + (7 / 15) ** 2) / (1 - (7 / 15) ** 2)
+    assert ggx_tables.dielectric_fresnel_mean(8 / 15, 8 / 15, eta) == pytest.approx(0.034703, abs=1e-4)
+
+
+def test_valid_reflection_normal_lifts_the_mirror_direction_to_the_threshold():
+    rng = np.random.default_rng(11)
+    m = 400
+    n_geo = np.tile([0.0, 0.0, 1.0], (m, 1))
+    wo = unit(rng.normal(size=(m, 3)) * [1, 1, 0.3] + [0, 0, 0.05])
+    wo[:, 2] = np.abs(wo[:, 2])
+    n_shade = unit(rng.normal(size=(m, 3)) * [0.8, 0.8, 0.3] + [0, 0, 1.0])
+    bent = valid_reflection_normal(n_geo, wo, n_shade)
+    mirror = 2.0 * np.einsum("ij,ij->i", bent, wo)[:, None] * bent - wo
+    threshold = np.minimum(0.9 * wo[:, 2], 0.01)
+    moved = np.abs(bent - n_shade).max(axis=1) > 0
+    assert 20 < moved.sum() < m
+    # Where the mirror direction of the shading normal cleared the threshold nothing changes;
+    # elsewhere the bent normal is a unit vector in the plane of the two normals whose mirror
+    # direction is exactly at the threshold (Cycles' ensure_valid_specular_reflection).
+    before = 2.0 * np.einsum("ij,ij->i", n_shade, wo)[:, None] * n_shade - wo
+    assert (before[~moved, 2] >= threshold[~moved]).all() and (before[moved, 2] < threshold[moved]).all()
+    np.testing.assert_allclose(np.linalg.norm(bent, axis=1), 1.0, atol=1e-12)
+    np.testing.assert_allclose(mirror[moved, 2], threshold[moved], atol=1e-9)
+    plane = np.cross(n_shade[moved], n_geo[moved])
+    np.testing.assert_allclose(np.einsum("ij,ij->i", plane, bent[moved]), 0.0, atol=1e-12)
 
 
 @pytest.mark.parametrize(
@@ -147,24 +208,28 @@ def test_validation_messages(make, message):
 
 def test_shade_keeps_diffuse_light_below_the_shading_horizon():
     # cos_o < 0: the observer is below the shading normal's horizon (a smooth-shaded face it
-    # still sees). The BRDF itself is 0 there; shade() keeps the view-independent diffuse terms
-    # exactly and cuts the specular lobes.
+    # still sees). The BRDF itself is 0 there; shade() (f cos i) keeps the view-independent
+    # diffuse terms and, without a bent normal, cuts the specular lobes (the strict treatment).
     cos_i, cos_o, cos_io = np.array([0.8]), np.array([-0.1]), np.array([-0.2])
     lambert = Lambertian(0.5)
     assert lambert.from_cosines(cos_i, cos_o, cos_io)[0] == 0.0
-    assert lambert.shade(cos_i, cos_o, cos_io)[0] == pytest.approx(0.5 / np.pi, rel=1e-15)
+    assert lambert.shade(cos_i, cos_o, cos_io)[0] == pytest.approx(0.5 / np.pi * 0.8, rel=1e-15)
     assert GGX(0.5, 0.3).shade(cos_i, cos_o, cos_io)[0] == 0.0
     principled = Principled(0.4, roughness=0.5)
-    # Only the diffuse base is left, attenuated by the specular albedo at the table's grazing end.
-    expected = principled.diffuse_weight(np.array([0.0]))[0] * 0.4 / np.pi
+    # Only the diffuse base is left, weighted at the table's grazing end.
+    expected = principled.diffuse_weight(np.array([0.0]))[0] * 0.4 / np.pi * 0.8
     assert principled.shade(cos_i, cos_o, cos_io)[0] == pytest.approx(expected, rel=1e-12)
-    # Above both horizons shade() is the BRDF (to the last bit).
+    # With a bent normal the lobe is evaluated about it, unless the light is below the shading
+    # normal's horizon (Cycles' bump shadowing term).
+    bent = GGX(0.5, 0.3).shade(cos_i, cos_o, cos_io, np.array([0.6]), np.array([0.05]))[0]
+    assert bent == pytest.approx(GGX(0.5, 0.3).from_cosines(0.6, 0.05, -0.2) * 0.6, rel=1e-12)
+    assert GGX(0.5, 0.3).shade(-cos_i, cos_o, cos_io, np.array([0.6]), np.array([0.05]))[0] == 0.0
+    # Above both horizons shade() is the BRDF times cos i.
     rng = np.random.default_rng(3)
     n = np.broadcast_to([0.0, 0.0, 1.0], (50, 3))
     wi = unit(rng.normal(size=(50, 3)) + [0, 0, 1.5])
     wo = unit(rng.normal(size=(50, 3)) + [0, 0, 1.5])
-    for brdf in (lambert, GGX(0.5, 0.3), principled):
+    for brdf in (lambert, GGX(0.5, 0.3), principled, GGX(0.5, 0.3, distribution="MULTI_GGX")):
         ci, co, cio = (np.einsum("ij,ij->i", a, b) for a, b in ((wi, n), (wo, n), (wi, wo)))
-        np.testing.assert_array_equal(
-            brdf.shade(ci, co, cio)[(ci > 0) & (co > 0)], brdf(wi, wo, n)[(ci > 0) & (co > 0)]
-        )
+        both = (ci > 0) & (co > 0)
+        np.testing.assert_allclose(brdf.shade(ci, co, cio)[both], (brdf(wi, wo, n) * ci)[both], rtol=1e-13)

@@ -4,6 +4,7 @@ import numpy as np
 from scipy import sparse
 
 from raycast.renderer import _cache_kernels
+from raycast.renderer.rays import SUN_RADIUS_SINE, sun_fractions
 
 
 def _case(seed, n_elements, n_frames, n_directions=40, n_groups=7, density=0.7):
@@ -31,7 +32,8 @@ def _numpy_reference(bits, sun_nodes, obs_nodes, sun, obs, normals, area):
     obs_all, obs_any = bits[obs_nodes].all(axis=1), bits[obs_nodes].any(axis=1)
     both = sun_all & obs_all
     out = (area @ both.T.astype(np.float64)).T
-    facing = (sun @ normals.T > 0.0) & (obs @ normals.T > 0.0)
+    # Facing the Sun while any of its disk is above the element's plane, and facing the observer.
+    facing = (sun @ normals.T > -SUN_RADIUS_SINE) & (obs @ normals.T > 0.0)
     mixed = sun_any & obs_any & ~both & facing
     frames, elements = np.nonzero(mixed)
     need = (~sun_all[frames, elements]).astype(np.uint8) | ((~obs_all[frames, elements]).astype(np.uint8) << 1)
@@ -103,7 +105,9 @@ def test_rays_and_open_fractions_follow_the_pairs_needs():
     obs = np.array([[0, 0, 1], [0, -1, 0]], dtype=np.float32)
     need = np.array([1, 2, 3], dtype=np.uint8)
     frames, elements = np.array([0, 1, 1]), np.array([3, 0, 2])
-    rays = _cache_kernels.pair_rays(need, frames, elements, origins, sun, obs)
+    # Element normals well above both Suns' planes: the rays go to the Sun itself.
+    normals = np.tile(np.array([0.6, 0.8, 0.0], dtype=np.float32), (4, 1))
+    rays = _cache_kernels.pair_rays(need, frames, elements, origins, normals, sun, obs)
     # Toward the Sun: pairs 0 and 2; then toward the observer: pairs 1 and 2; two points each.
     expected = [(3, sun[0]), (3, sun[0]), (2, sun[1]), (2, sun[1]), (0, obs[1]), (0, obs[1]), (2, obs[1]), (2, obs[1])]
     point = [0, 1] * 4
@@ -122,12 +126,13 @@ def test_class_sums_gate_and_weight_by_the_geometric_normal():
     normal_geo, normal_shade = unit(rng.normal(size=(n_groups, 3))), unit(rng.normal(size=(n_groups, 3)))
     group_class = rng.integers(0, n_classes, n_groups).astype(np.int32)
     sun, obs = unit(rng.normal(size=(m, 3))), unit(rng.normal(size=(m, 3)))
-    area, normal = _cache_kernels.class_sums(
+    area, normal, geo = _cache_kernels.class_sums(
         np.ascontiguousarray(weight.T), normal_geo, normal_shade, group_class, sun, obs, n_classes
     )
     cos_o, cos_s = normal_geo @ obs.T, normal_geo @ sun.T
-    gated = np.maximum(weight, 0.0) * np.where((cos_o > 0) & (cos_s > 0), cos_o, 0.0)
+    gated = np.maximum(weight, 0.0) * np.where(cos_o > 0, cos_o, 0.0) * sun_fractions(cos_s)
     one_hot = np.eye(n_classes)[group_class].T  # (c, g)
     np.testing.assert_allclose(area, (one_hot @ gated).T, rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(normal, np.einsum("cg,gm,gk->mck", one_hot, gated, normal_shade), rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(geo, np.einsum("cg,gm,gk->mck", one_hot, gated, normal_geo), rtol=1e-5, atol=1e-6)
     assert (area > 0).sum() > 5

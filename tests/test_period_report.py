@@ -255,7 +255,9 @@ def test_pass_figure_axes_come_from_the_data(surveyed):
     result = archive.load_result(stored.pass_id, "periods", "default", PeriodResult.from_hdf5)
     lc = LightCurve.from_pass(stored)
     fig = pass_figure(result, lc)
-    curve, power, fold = fig.axes
+    curve, power, fold, colour_bar = fig.axes
+    assert colour_bar.get_ylabel().startswith("cycle")  # the fold's colours have a key
+    assert fold.get_ylabel() == f"{lc.band} magnitude (reduced to 1000 km) - trend"
     bottom, top = curve.get_ylim()
     # Brighter up, and the range is the data's (within 15% margins), whatever the model does.
     assert bottom > top

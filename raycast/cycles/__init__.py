@@ -4,6 +4,14 @@ Needs the optional ``cycles`` extra (Blender's ``bpy``); without it the function
 install it. See docs/cycles.md.
 """
 
-from raycast.cycles.runner import CyclesMesh, CyclesResult, CyclesSettings, NoiseStudy, measure_noise, render_cycles
+from raycast.cycles.runner import (
+    CyclesMesh,
+    CyclesResult,
+    CyclesSettings,
+    NoiseStudy,
+    ObjImport,
+    measure_noise,
+    render_cycles,
+)
 
-__all__ = ["CyclesMesh", "CyclesResult", "CyclesSettings", "NoiseStudy", "measure_noise", "render_cycles"]
+__all__ = ["CyclesMesh", "CyclesResult", "CyclesSettings", "NoiseStudy", "ObjImport", "measure_noise", "render_cycles"]

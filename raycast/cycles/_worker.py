@@ -61,10 +61,13 @@ def render_job(job, on_frame=None):
     job : dict
         ``vertices_m (V, 3)``, ``triangles (T, 3)``, ``material_index (T,)``,
         ``corner_normals (T, 3, 3)`` (optional; absent means flat shading),
-        ``materials_json`` (str, a JSON list of material entries), ``sun_body (m, 3)``,
+        ``materials_json`` (str, a JSON list of material entries) -- or instead of the arrays
+        ``obj_path`` (str, an OBJ file read by Blender's own importer) with
+        ``material_names_json`` (str, a JSON list naming each entry's material) --, ``sun_body (m, 3)``,
         ``obs_body (m, 3)`` (unit vectors in the mesh frame), ``passes (p, 2)`` (samples, seed
         of each render of every frame), ``resolution_px`` (pixels across the larger side of the
-        projected footprint), ``sun_angle_deg`` and ``threads`` (0 = all cores).
+        projected footprint), ``sun_angle_deg``, ``threads`` (0 = all cores) and the object's
+        shadow terminator offsets ``terminator_geometry_offset`` and ``terminator_shading_offset``.
     on_frame : callable or None
         Called with the frame index after each frame's passes are done.
 
@@ -78,14 +81,13 @@ def render_job(job, on_frame=None):
     """
     start = time.perf_counter()
     scene = _new_scene(job)
-    _add_mesh(scene, job)
+    vertices = _import_obj(scene, job) if "obj_path" in job else _add_mesh(scene, job)
     sun = _add_sun(scene, float(job["sun_angle_deg"]))
     camera = _add_camera(scene)
 
     sun_body = np.asarray(job["sun_body"], dtype=float)
     obs_body = np.asarray(job["obs_body"], dtype=float)
     passes = np.asarray(job["passes"], dtype=int)
-    vertices = np.asarray(job["vertices_m"], dtype=float)
     n_frames, n_passes = len(sun_body), len(passes)
     framing = _framing(vertices, obs_body, int(job["resolution_px"]))
 
@@ -205,7 +207,8 @@ def _new_scene(job):
 
 
 def _add_mesh(scene, job):
-    """The triangles, their materials and, when given, their per-corner shading normals."""
+    """The triangles, their materials and, when given, their per-corner shading normals;
+    returns the vertices."""
     vertices = np.asarray(job["vertices_m"], dtype=float)
     triangles = np.asarray(job["triangles"], dtype=int)
     mesh = bpy.data.meshes.new("model")
@@ -220,13 +223,43 @@ def _add_mesh(scene, job):
         mesh.normals_split_custom_set(corner_normals.reshape(-1, 3).tolist())
     mesh.update()
     model = bpy.data.objects.new("model", mesh)
-    # Blender's default shadow terminator geometry offset (0.1) starts shadow rays off
-    # low-poly smooth-shaded faces as if from the smooth surface: it lights tube segments that
-    # the mesh's own steps shadow at grazing Sun. The light curve is of the mesh as it is.
-    model.cycles.shadow_terminator_geometry_offset = 0.0
-    model.cycles.shadow_terminator_offset = 0.0
+    _set_terminator_offsets(model, job)
     scene.collection.objects.link(model)
-    return model
+    return vertices
+
+
+def _set_terminator_offsets(model, job):
+    """The object's shadow terminator offsets, from the job."""
+    # The shadow terminator offsets live on the object (Blender 5: Object.shadow_terminator_*;
+    # the like-named properties under object.cycles are leftovers that Cycles no longer reads).
+    # Blender's default geometry offset (0.1) starts shadow rays off low-poly smooth-shaded faces
+    # as if from the smooth surface: it lights tube segments that the mesh's own steps shadow at
+    # grazing Sun. The job's default (0) renders the mesh as it is.
+    model.shadow_terminator_geometry_offset = float(job["terminator_geometry_offset"])
+    model.shadow_terminator_shading_offset = float(job["terminator_shading_offset"])
+
+
+def _import_obj(scene, job):
+    """An OBJ file as Blender's own importer reads it (its triangulation, its normals), with
+    the job's materials put in the slots of the same names; returns the world-space vertices."""
+    before = set(bpy.data.objects)
+    bpy.ops.wm.obj_import(filepath=str(job["obj_path"]), forward_axis="Y", up_axis="Z")
+    entries = dict(zip(json.loads(str(job["material_names_json"])), json.loads(str(job["materials_json"]))))
+    built, vertices = {}, []
+    for model in (ob for ob in bpy.data.objects if ob not in before and ob.type == "MESH"):
+        if model.name not in scene.collection.all_objects:
+            scene.collection.objects.link(model)
+        _set_terminator_offsets(model, job)
+        for slot in model.material_slots:
+            name = slot.material.name if slot.material is not None else ""
+            if name not in entries:
+                raise KeyError(f"the OBJ's material {name!r} has no entry in the job")
+            slot.material = built.setdefault(name, _material(entries[name]))
+        local = np.empty(3 * len(model.data.vertices))
+        model.data.vertices.foreach_get("co", local)
+        matrix = np.array(model.matrix_world)
+        vertices.append(local.reshape(-1, 3) @ matrix[:3, :3].T + matrix[:3, 3])
+    return np.concatenate(vertices)
 
 
 def _smooth_faces(vertices, triangles, corner_normals):

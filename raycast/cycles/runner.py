@@ -38,17 +38,20 @@ from types import MappingProxyType
 import numpy as np
 from tqdm.auto import tqdm
 
+from raycast.renderer.brdf import GGX, Lambertian, Principled
 from raycast.renderer.materials import read_materials_json
 from raycast.renderer.meshio import read_obj
 
 __all__ = [
     "CyclesMesh",
+    "ObjImport",
     "CyclesSettings",
     "CyclesResult",
     "NoiseStudy",
     "render_cycles",
     "measure_noise",
     "MATERIAL_FIELDS",
+    "material_entry",
 ]
 
 INSTALL_HINT = "install the 'cycles' extra (pip install -e '.[cycles]') to render with Blender Cycles"
@@ -251,6 +254,23 @@ class CyclesMesh:
             material_names=tuple(mesh.material_names),
         )
 
+    @classmethod
+    def from_scene(cls, scene) -> CyclesMesh:
+        """The posed triangles, shading normals and BRDFs of a `raycast.renderer.scene.Scene`.
+
+        Each BRDF becomes the Blender node it models, with its parameters (grey colours: a
+        scene's BRDFs hold one colour channel), so both renderers are given the same surface.
+        """
+        posed = scene.posed()
+        return cls(
+            vertices_m=posed.vertices_m,
+            triangles=np.arange(len(posed.vertices_m)).reshape(-1, 3),
+            material_index=posed.material_index,
+            materials=tuple(material_entry(brdf) for brdf in scene.brdfs),
+            corner_normals=posed.corner_normals,
+            material_names=scene.material_names,
+        )
+
     # ---- operations returning new meshes ----
 
     def with_material(self, entry: Mapping) -> CyclesMesh:
@@ -278,6 +298,81 @@ class CyclesMesh:
     @property
     def n_triangles(self) -> int:
         return len(self.triangles)
+
+    def job(self) -> dict:
+        """The arrays a render job takes."""
+        job = {
+            "vertices_m": self.vertices_m,
+            "triangles": self.triangles,
+            "material_index": self.material_index,
+            "materials_json": np.array(json.dumps([dict(entry) for entry in self.materials])),
+        }
+        if self.corner_normals is not None:
+            job["corner_normals"] = self.corner_normals
+        return job
+
+
+@dataclass(frozen=True, eq=False)
+class ObjImport:
+    """An OBJ file as Blender's own OBJ importer reads it (``forward_axis="Y", up_axis="Z"``:
+    the file is in Blender's axes), with a materials-JSON entry per ``usemtl`` name: the scene
+    is then Blender's, its triangulation of polygons and its shading normals included, not
+    the project's reading of the file (`CyclesMesh.from_obj`).
+
+    Attributes
+    ----------
+    path : Path
+    materials : tuple of (name, entry) pairs
+    """
+
+    path: Path
+    materials: tuple
+
+    @classmethod
+    def from_files(cls, path, materials_json) -> ObjImport:
+        """The OBJ at ``path`` with the entries of its ``usemtl`` names in ``materials_json``."""
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"OBJ file {path} does not exist; give the path of a Wavefront .obj")
+        table = read_materials_json(materials_json)
+        names = list(dict.fromkeys(read_obj(path).material_names))
+        unknown = [name for name in names if name not in table]
+        if unknown:
+            raise ValueError(
+                f'material {unknown[0]!r} used in {path} has no entry in {materials_json}; add it under "materials"'
+            )
+        return cls(path, tuple((name, _checked_material(table[name], name)) for name in names))
+
+    def job(self) -> dict:
+        return {
+            "obj_path": np.array(str(self.path.resolve())),
+            "materials_json": np.array(json.dumps([entry for _, entry in self.materials])),
+            "material_names_json": np.array(json.dumps([name for name, _ in self.materials])),
+        }
+
+
+def material_entry(brdf) -> dict:
+    """The materials-JSON entry of the Blender node a `raycast.renderer.brdf` BRDF models."""
+    if isinstance(brdf, Lambertian):
+        return {"blender_node": "Diffuse BSDF", "color": [brdf.albedo] * 3}
+    if isinstance(brdf, GGX):
+        return {
+            "blender_node": "Glossy BSDF",
+            "color": [brdf.color] * 3,
+            "roughness": brdf.roughness,
+            "distribution": brdf.distribution,
+        }
+    if isinstance(brdf, Principled):
+        return {
+            "blender_node": "Principled BSDF",
+            "base_color": [brdf.base_color] * 3,
+            "metallic": brdf.metallic,
+            "roughness": brdf.roughness,
+            "specular_ior_level": brdf.specular_ior_level,
+            "ior": brdf.ior,
+            "distribution": brdf.distribution,
+        }
+    raise TypeError(f"{brdf!r} models no Blender node; give Lambertian, GGX or Principled BRDFs")
 
 
 def _finite_array(value, name, shape, dtype):
@@ -396,6 +491,11 @@ class CyclesSettings:
     process : {"subprocess", "in_process"}
         Run Blender in a child process (default; isolates Blender's bundled libraries and any
         crash) or in this one (saves ~1 s of start-up; resets bpy's current scene).
+    terminator_geometry_offset, terminator_shading_offset : float in [0, 1]
+        The mesh object's shadow terminator offsets (Blender's ``Object.shadow_terminator_*``).
+        0 (the default here) renders the mesh as it is; Blender's own defaults are 0.1 and 0,
+        with which shadow rays leave low-poly smooth-shaded faces as if from the smooth surface
+        they stand for (docs/cycles.md, "How a frame is rendered").
     """
 
     samples: int = 64
@@ -406,6 +506,8 @@ class CyclesSettings:
     channel: str = "green"
     noise_passes: int = 1
     process: str = "subprocess"
+    terminator_geometry_offset: float = 0.0
+    terminator_shading_offset: float = 0.0
 
     DEFAULT_RESOLUTION_PX = 128
 
@@ -429,6 +531,12 @@ class CyclesSettings:
             raise ValueError(
                 f"CyclesSettings sun_angle_deg={self.sun_angle_deg!r}; give degrees in [0, 10] (the Sun is 0.53)"
             )
+        for name in ("terminator_geometry_offset", "terminator_shading_offset"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= value <= 1.0:
+                raise ValueError(
+                    f"CyclesSettings {name}={value!r}; give a number in [0, 1] (0 renders the mesh as it is)"
+                )
         if self.channel not in ("mean", *_CHANNELS):
             raise ValueError(f"CyclesSettings channel={self.channel!r}; use 'green', 'red', 'blue' or 'mean'")
         if self.samples % self.noise_passes:
@@ -571,7 +679,7 @@ def render_cycles(mesh, sun_body, obs_body, settings=None, progress=True) -> Cyc
 
     Parameters
     ----------
-    mesh : CyclesMesh
+    mesh : CyclesMesh or ObjImport
         The scene, in the body frame.
     sun_body : (m, 3) float
         Unit vectors from the object toward the Sun, body frame.
@@ -665,8 +773,10 @@ def _channel(rgb, channel):
 
 def _run(mesh, sun_body, obs_body, settings, passes, progress):
     """Validate the inputs, build the job and hand it to the runner `settings.process` names."""
-    if not isinstance(mesh, CyclesMesh):
-        raise TypeError(f"mesh is {type(mesh).__name__}; give a CyclesMesh (CyclesMesh.from_obj or from_arrays)")
+    if not isinstance(mesh, (CyclesMesh, ObjImport)):
+        raise TypeError(
+            f"mesh is {type(mesh).__name__}; give a CyclesMesh (CyclesMesh.from_obj or from_arrays) or an ObjImport"
+        )
     sun = _unit_directions(sun_body, "sun_body")
     obs = _unit_directions(obs_body, "obs_body")
     if len(sun) != len(obs):
@@ -674,19 +784,16 @@ def _run(mesh, sun_body, obs_body, settings, passes, progress):
     if not _bpy_available():
         raise ModuleNotFoundError(f"bpy (Blender as a Python module) is not installed; {INSTALL_HINT}")
     job = {
-        "vertices_m": mesh.vertices_m,
-        "triangles": mesh.triangles,
-        "material_index": mesh.material_index,
-        "materials_json": np.array(json.dumps([dict(entry) for entry in mesh.materials])),
+        **mesh.job(),
         "sun_body": sun,
         "obs_body": obs,
         "passes": np.asarray(passes, dtype=np.int64).reshape(-1, 2),
         "resolution_px": np.int64(settings.resolution_px),
         "sun_angle_deg": np.float64(settings.sun_angle_deg),
         "threads": np.int64(settings.threads or 0),
+        "terminator_geometry_offset": np.float64(settings.terminator_geometry_offset),
+        "terminator_shading_offset": np.float64(settings.terminator_shading_offset),
     }
-    if mesh.corner_normals is not None:
-        job["corner_normals"] = mesh.corner_normals
     with tqdm(total=len(sun), desc="Cycles", unit="frame", disable=not progress) as bar:
         return _RUNNERS[settings.process](job, lambda frame: bar.update(1))
 

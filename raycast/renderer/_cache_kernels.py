@@ -6,12 +6,14 @@
   all of them) and ORed (at any) one word at a time; an element's area is added to its groups
   where all eight agree, and the pairs where they differ are returned for exact rays. Only the
   set bits are read.
-* Shading classes (:func:`class_sums`): the groups' gated areas and shading normals summed into
-  their classes in one pass.
+* Shading classes (:func:`class_sums`): the groups' gated areas, shading and geometric normals
+  summed into their classes in one pass.
 """
 
 from numba import njit
 import numpy as np
+
+from raycast.renderer.rays import SUN_RADIUS_SINE, risen_sun, sun_fraction
 
 # De Bruijn sequence for the index of a word's lowest set bit.
 _DEBRUIJN = np.uint64(0x03F79D71B4CB0A89)
@@ -167,7 +169,7 @@ def _agreed_weight(out, words, sun_nodes, obs_nodes, sun, obs, normals, ptr, gro
                 mixed &= mixed - one
                 e = base + bit
                 nx, ny, nz = normals[e, 0], normals[e, 1], normals[e, 2]
-                if nx * sx + ny * sy + nz * sz <= 0.0 or nx * ox + ny * oy + nz * oz <= 0.0:
+                if nx * sx + ny * sy + nz * sz <= -SUN_RADIUS_SINE or nx * ox + ny * oy + nz * oz <= 0.0:
                     continue
                 if count < capacity:
                     shift = np.uint64(bit)
@@ -200,13 +202,16 @@ def class_sums(weight, normal_geo, normal_shade, group_class, sun, obs, n_classe
 
     Returns
     -------
-    area : (m, c) float32, sum of weight x max(n_geo . obs, 0) over the class's groups facing
-        both the Sun and the observer (the gates of the geometric normal).
+    area : (m, c) float32, sum of weight x max(n_geo . obs, 0) x the part of the solar disk
+        above the group's plane (:func:`raycast.renderer.rays.sun_fraction`) over the class's
+        groups (the gates of the geometric normal).
     normal : (m, c, 3) float32, the same sum of each group's shading normal (not normalised).
+    geo : (m, c, 3) float32, and of each group's geometric normal.
     """
     m, n_groups = weight.shape
     area = np.zeros((m, n_classes), dtype=np.float32)
     normal = np.zeros((m, n_classes, 3), dtype=np.float32)
+    geo = np.zeros((m, n_classes, 3), dtype=np.float32)
     for f in range(m):
         sx, sy, sz = sun[f, 0], sun[f, 1], sun[f, 2]
         ox, oy, oz = obs[f, 0], obs[f, 1], obs[f, 2]
@@ -216,21 +221,27 @@ def class_sums(weight, normal_geo, normal_shade, group_class, sun, obs, n_classe
                 continue
             gx, gy, gz = normal_geo[g, 0], normal_geo[g, 1], normal_geo[g, 2]
             cos_o = gx * ox + gy * oy + gz * oz
-            if cos_o <= 0.0 or gx * sx + gy * sy + gz * sz <= 0.0:
+            cos_s = gx * sx + gy * sy + gz * sz
+            if cos_o <= 0.0 or cos_s <= -SUN_RADIUS_SINE:
                 continue
-            w *= cos_o
+            w *= cos_o * sun_fraction(cos_s)
             c = group_class[g]
             area[f, c] += w
             normal[f, c, 0] += w * normal_shade[g, 0]
             normal[f, c, 1] += w * normal_shade[g, 1]
             normal[f, c, 2] += w * normal_shade[g, 2]
-    return area, normal
+            geo[f, c, 0] += w * gx
+            geo[f, c, 1] += w * gy
+            geo[f, c, 2] += w * gz
+    return area, normal, geo
 
 
 @njit(cache=True, nogil=True)
-def pair_rays(need, frames, elements, origins, sun, obs):
+def pair_rays(need, frames, elements, origins, normals, sun, obs):
     """(r, 6) float32 rays: from each of an element's k points toward the Sun for the pairs
-    needing it (``need & 1``), then toward the observer (``need & 2``); origins (e, k, 3)."""
+    needing it (``need & 1``; toward the part of the disk above the element's plane,
+    :func:`raycast.renderer.rays.risen_sun`), then toward the observer (``need & 2``);
+    origins (e, k, 3), element normals (e, 3)."""
     k = origins.shape[1]
     n_sun, n_obs = 0, 0
     for i in range(len(need)):
@@ -238,14 +249,18 @@ def pair_rays(need, frames, elements, origins, sun, obs):
         n_obs += (need[i] >> 1) & 1
     rays = np.empty(((n_sun + n_obs) * k, 6), dtype=np.float32)
     row = 0
-    for flag, directions in ((1, sun), (2, obs)):
+    for flag in (1, 2):
         for i in range(len(need)):
             if need[i] & flag:
                 e, f = elements[i], frames[i]
+                if flag == 1:
+                    dx, dy, dz = risen_sun(normals[e, 0], normals[e, 1], normals[e, 2], sun[f, 0], sun[f, 1], sun[f, 2])
+                else:
+                    dx, dy, dz = obs[f, 0], obs[f, 1], obs[f, 2]
                 for j in range(k):
                     for x in range(3):
                         rays[row, x] = origins[e, j, x]
-                        rays[row, 3 + x] = directions[f, x]
+                    rays[row, 3], rays[row, 4], rays[row, 5] = dx, dy, dz
                     row += 1
     return rays
 
@@ -268,3 +283,61 @@ def open_fraction(need, occluded, k):
     for i in range(n):
         fraction[i] = is_open[i].sum() / k
     return fraction
+
+
+@njit(cache=True, nogil=True)
+def visibility_rays(points, normals, directions, band, offset):
+    """Rays from elements toward grid directions, for the visibility tables of the build.
+
+    Every direction less than ``band`` (a sine) below an element's plane gets a ray; those
+    below the plane take their mirror image above it (see ``raycast.renderer.cache._visibility``).
+
+    Parameters
+    ----------
+    points, normals : (e, 3) float, element centroids and unit geometric normals.
+    directions : (d, 3) float, unit grid directions.
+    band : float; offset : float, how far above its element a ray starts.
+
+    Returns
+    -------
+    rays : (r, 6) float32; element, direction : (r,) int32, each ray's pair.
+    """
+    n_elements, n_directions = len(points), len(directions)
+    count = 0
+    for e in range(n_elements):
+        for d in range(n_directions):
+            h = normals[e, 0] * directions[d, 0] + normals[e, 1] * directions[d, 1] + normals[e, 2] * directions[d, 2]
+            if h > -band:
+                count += 1
+    rays = np.empty((count, 6), dtype=np.float32)
+    element = np.empty(count, dtype=np.int32)
+    direction = np.empty(count, dtype=np.int32)
+    row = 0
+    for e in range(n_elements):
+        ox = points[e, 0] + offset * normals[e, 0]
+        oy = points[e, 1] + offset * normals[e, 1]
+        oz = points[e, 2] + offset * normals[e, 2]
+        for d in range(n_directions):
+            h = normals[e, 0] * directions[d, 0] + normals[e, 1] * directions[d, 1] + normals[e, 2] * directions[d, 2]
+            if h <= -band:
+                continue
+            lift = -2.0 * min(h, 0.0)
+            x = directions[d, 0] + lift * normals[e, 0]
+            y = directions[d, 1] + lift * normals[e, 1]
+            z = directions[d, 2] + lift * normals[e, 2]
+            norm = np.sqrt(x * x + y * y + z * z)
+            rays[row, 0], rays[row, 1], rays[row, 2] = ox, oy, oz
+            rays[row, 3], rays[row, 4], rays[row, 5] = x / norm, y / norm, z / norm
+            element[row], direction[row] = e, d
+            row += 1
+    return rays, element, direction
+
+
+@njit(cache=True, nogil=True)
+def clear_bits(bits, element, direction, occluded):
+    """Clear the bit of each occluded ray's (element, direction) in ``bits`` (e, ceil(d / 8))
+    uint8, element-major, bit order as ``numpy.packbits`` (direction d at bit 7 - d % 8 of byte d // 8)."""
+    for r in range(len(occluded)):
+        if occluded[r]:
+            d = direction[r]
+            bits[element[r], d >> 3] &= np.uint8(255 - (1 << (7 - (d & 7))))

@@ -7,6 +7,8 @@ interpolation: one pass per batch of rays instead of a dozen (n, 3) gathers.
 from numba import njit
 import numpy as np
 
+from raycast.renderer.rays import SUN_RADIUS_SINE, risen_sun
+
 
 @njit(cache=True, nogil=True)
 def tile_rays(tile_origin, owner, step_u, step_v, backward, tile):
@@ -54,7 +56,8 @@ def ray_hits(rays, t_hit, prim_ids, uvs, owner, rays_per_owner):
 
 @njit(cache=True, nogil=True)
 def sunward_hits(frames, prim, points, face_normals, sun, obs, offset):
-    """Hits on a face turned toward the Sun, and their shadow rays.
+    """Hits on a face turned toward the Sun (some of its disk above the face's plane), and
+    their shadow rays (toward the part of the disk above the plane: :func:`raycast.renderer.rays.risen_sun`).
 
     The face normal is turned toward the observer (either side of a face may be seen).
 
@@ -74,15 +77,16 @@ def sunward_hits(frames, prim, points, face_normals, sun, obs, offset):
         if nx * obs[f, 0] + ny * obs[f, 1] + nz * obs[f, 2] < 0.0:
             nx, ny, nz = -nx, -ny, -nz
         normals[n, 0], normals[n, 1], normals[n, 2] = nx, ny, nz
-        if nx * sun[f, 0] + ny * sun[f, 1] + nz * sun[f, 2] > 0.0:
+        if nx * sun[f, 0] + ny * sun[f, 1] + nz * sun[f, 2] > -SUN_RADIUS_SINE:
             lit[count] = n
             count += 1
     rays = np.empty((count, 6), dtype=np.float32)
     for k in range(count):
         n, f = lit[k], frames[lit[k]]
+        direction = risen_sun(normals[n, 0], normals[n, 1], normals[n, 2], sun[f, 0], sun[f, 1], sun[f, 2])
         for x in range(3):
             rays[k, x] = points[n, x] + offset * normals[n, x]
-            rays[k, 3 + x] = sun[f, x]
+            rays[k, 3 + x] = direction[x]
     return normals, lit[:count], rays
 
 
@@ -145,7 +149,7 @@ def raster_hits(
     owners, prim : (k,) int64, frame and triangle of each kept hit.
     uv : (k, 2) float32, barycentric (u, v).
     shadow_rays : (k, 6) float32, from ``offset`` above the hit (along the face normal turned
-        toward the observer) toward the Sun.
+        toward the observer) toward the Sun (the part of its disk above the face's plane).
     """
     n_tri = len(corners)
     window = np.zeros((len(frames), 4), dtype=np.int64)
@@ -246,6 +250,14 @@ def raster_hits(
             side = 1.0
             if face_normals[t, 0] * obs[f, 0] + face_normals[t, 1] * obs[f, 1] + face_normals[t, 2] * obs[f, 2] < 0.0:
                 side = -1.0
+            direction = risen_sun(
+                side * face_normals[t, 0],
+                side * face_normals[t, 1],
+                side * face_normals[t, 2],
+                sun[f, 0],
+                sun[f, 1],
+                sun[f, 2],
+            )
             for x in range(3):
                 shadow_rays[count, x] = (
                     (1.0 - a - b) * corners[t, 0, x]
@@ -253,7 +265,7 @@ def raster_hits(
                     + b * corners[t, 2, x]
                     + offset * side * face_normals[t, x]
                 )
-                shadow_rays[count, 3 + x] = sun[f, x]
+                shadow_rays[count, 3 + x] = direction[x]
             count += 1
     return owners[:count], prim[:count], uv[:count], shadow_rays[:count]
 

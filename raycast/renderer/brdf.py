@@ -1,4 +1,4 @@
-"""Bidirectional reflectance distribution functions (BRDFs).
+"""Bidirectional reflectance distribution functions (BRDFs), as Blender Cycles evaluates its BSDFs.
 
 A BRDF is a small immutable object with one method, ``__call__(wi, wo, n) -> (m,)``: the value
 of f_r in 1/sr for light arriving from ``wi`` and leaving toward ``wo`` at a surface with shading
@@ -11,14 +11,14 @@ Isotropic BRDFs depend on three cosines only, so each class implements
 broadcastable shapes) and ``__call__`` computes them. Renderers evaluate whole (frames, surface
 elements) blocks from matrix products of directions and normals this way.
 
-``shade(cos_i, cos_o, cos_io)`` is what the renderers use on smooth-shaded meshes: the same
-value, except that diffuse terms are not cut where the observer is below the *shading* normal's
-horizon (only ``cos_i > 0`` is required of them; the renderer tests the observer against the
-geometric normal). A Lambertian surface's radiance does not depend on the view, and on a
-low-poly smooth-shaded mesh the shading normal leans up to tens of degrees from the face:
-cutting it there would darken a band of faces the observer does see. Blender Cycles does the
-same (docs/cycles.md, calibration table). Specular lobes keep the cut (Cycles bends the normal
-instead; see docs/renderer.md).
+``shade(cos_i, cos_o, cos_io, spec_cos_i, spec_cos_o)`` is what the renderers use: f_r times the
+cosine of incidence, with shading normals treated as Cycles treats them (docs/renderer.md,
+"Shading normals"). Diffuse terms use the shading normal's cosine of incidence and are not cut
+where the observer is below the shading normal's horizon (the hit proves the observer sees the
+face). Specular lobes are evaluated about the normal whose cosines ``spec_cos_i``,
+``spec_cos_o`` give: Cycles' valid-reflection normal (:func:`valid_reflection_normal`), bent
+from the shading normal toward the face until the view's mirror direction clears the surface;
+without them, about the shading normal, cut below its horizon (the stricter treatment).
 
 Implementations
 ---------------
@@ -28,40 +28,52 @@ GGX
     Blender's Glossy BSDF: f = color * D(h) * G(i, o) / (4 cos i cos o), D the GGX
     (Trowbridge-Reitz) distribution with alpha = roughness**2, no Fresnel. ``masking`` chooses
     the Smith shadowing-masking term: ``"height-correlated"`` 1 / (1 + L(i) + L(o)) as in
-    Cycles' ``bsdf_microfacet_eval``, or ``"separable"`` G1(i) G1(o). The two agree within 0.1%
-    unless a direction is within ~15 deg of grazing (see docs/renderer.md).
+    Cycles' ``bsdf_microfacet_eval``, or ``"separable"`` G1(i) G1(o). ``distribution="MULTI_GGX"``
+    adds Cycles' multiple-scattering energy compensation (a factor of the view direction).
 Principled
-    A dielectric/metallic layer model after Blender 4+ Principled BSDF (no sheen, coat,
-    transmission or subsurface): a GGX specular lobe with the real dielectric Fresnel of
-    ``ior`` (rescaled by ``specular_ior_level`` as Blender does), over a Lambertian base
-    attenuated by ``1 - E_spec(cos o)``, the specular lobe's directional albedo seen from the
-    observer (Cycles' ``closure_layering_weight``); the metallic part is a GGX lobe with Schlick
-    Fresnel toward ``base_color``. Single-scattering GGX: Blender's multiscatter energy
-    compensation adds < 0.5% of the specular lobe for roughness <= 0.5 and F0 <= 0.05.
-    Because the diffuse attenuation depends on the observer side only, this model (like
-    Cycles') is not exactly reciprocal.
+    Blender's Principled BSDF without sheen, coat, transmission or subsurface, layered as
+    Cycles layers it: a metallic GGX lobe (Schlick Fresnel toward ``base_color``) with weight
+    ``metallic``; over the rest a dielectric GGX lobe with the real Fresnel curve of ``ior``
+    (F0 rescaled by ``specular_ior_level`` as Blender does), and under it a Lambertian base
+    weighted by ``1 - d(mu) (F0 + (1 - F0) s(mu))``: Cycles' albedo estimate of the specular
+    lobe at the view cosine mu, from tables of GGX integrals (:mod:`raycast.renderer.ggx_tables`),
+    with d the multiple-scattering factor (1 for plain GGX). Because the weight depends on the
+    view only, this model (like Cycles') is not exactly reciprocal.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from functools import lru_cache
+from dataclasses import dataclass
 import math
 
 import numpy as np
+
+from raycast.renderer.ggx_tables import (
+    dielectric_fresnel,
+    dielectric_fresnel_mean,
+    fresnel_mean_fit,
+    ggx_albedo,
+    ggx_average_albedo,
+)
 
 __all__ = [
     "BRDF",
     "Lambertian",
     "GGX",
     "Principled",
+    "DISTRIBUTIONS",
     "fresnel_dielectric",
     "ggx_distribution",
     "smith_lambda",
+    "valid_reflection_normal",
     "directional_albedo",
 ]
 
 MASKING_MODES = ("height-correlated", "separable")
+# Blender's names of the microfacet distributions modelled here.
+DISTRIBUTIONS = ("GGX", "MULTI_GGX")
+
+fresnel_dielectric = dielectric_fresnel
 
 
 def _dot(a, b):
@@ -71,6 +83,11 @@ def _dot(a, b):
 def _check_unit_interval(name, value, owner):
     if not (isinstance(value, (int, float)) and math.isfinite(value) and 0.0 <= value <= 1.0):
         raise ValueError(f"{owner}: {name}={value!r} is outside [0, 1]; give a reflectance-like fraction")
+
+
+def _check_distribution(value, owner):
+    if value not in DISTRIBUTIONS:
+        raise ValueError(f"{owner}: distribution={value!r} is unknown; use one of {DISTRIBUTIONS}")
 
 
 def ggx_distribution(cos_nh, alpha):
@@ -93,22 +110,49 @@ def smith_lambda(cos_n, alpha):
     return 0.5 * (np.sqrt(1.0 + alpha * alpha * tan2) - 1.0)
 
 
-def fresnel_dielectric(cos_i, eta):
-    """Unpolarised Fresnel reflectance of a dielectric of relative index ``eta``, shape (m,)."""
-    c = np.abs(cos_i)
-    g2 = eta * eta - 1.0 + c * c
-    g = np.sqrt(np.maximum(g2, 0.0))
-    a = (g - c) / (g + c)
-    b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
-    return np.where(g2 > 0.0, 0.5 * a * a * (1.0 + b * b), 1.0)
-
-
 def _f0_from_ior(ior):
     return ((ior - 1.0) / (ior + 1.0)) ** 2
 
 
+def valid_reflection_normal(n_geo, wo, n_shade):
+    """Cycles' valid-reflection normal (``ensure_valid_specular_reflection``), shape (m, 3).
+
+    Where the mirror image of the view ``wo`` about the shading normal ``n_shade`` lies less
+    than ``t = min(0.9 n_geo.wo, 0.01)`` above the face (normal ``n_geo``, turned toward the
+    observer), the normal is turned toward ``n_geo`` in the plane of the two, just enough that
+    the mirror image is exactly ``t`` above the face; elsewhere it is ``n_shade`` unchanged.
+    Specular lobes on smooth-shaded faces are evaluated about this normal.
+
+    Parameters
+    ----------
+    n_geo, wo, n_shade : (m, 3) float unit vectors; ``n_geo.wo >= 0``.
+    """
+    cos_no = _dot(n_shade, wo)
+    i_z = _dot(wo, n_geo)
+    mirror_z = 2.0 * cos_no * _dot(n_shade, n_geo) - i_z
+    threshold = np.minimum(0.9 * i_z, 0.01)
+    bend = mirror_z < threshold
+    if not bend.any():
+        return n_shade
+    ng, wo_b, ns = n_geo[bend], wo[bend], n_shade[bend]
+    i_z, threshold = i_z[bend], threshold[bend]
+    x_axis = ns - _dot(ns, ng)[:, None] * ng
+    length = np.linalg.norm(x_axis, axis=1, keepdims=True)
+    x_axis = np.where(length > 0.0, x_axis / np.where(length > 0.0, length, 1.0), ns)
+    i_x = _dot(wo_b, x_axis)
+    a = i_x * i_x + i_z * i_z
+    b = 2.0 * (a + i_z * threshold)
+    c = (threshold + i_z) ** 2
+    root = np.sqrt(np.maximum(b * b - 4.0 * a * c, 0.0))
+    n_z2 = np.where(i_x < 0.0, 0.25 * (b + root) / a, 0.25 * (b - root) / a)
+    bent = np.sqrt(np.maximum(1.0 - n_z2, 0.0))[:, None] * x_axis + np.sqrt(np.maximum(n_z2, 0.0))[:, None] * ng
+    out = np.array(n_shade, dtype=np.result_type(n_shade, np.float32), copy=True)
+    out[bend] = bent
+    return out
+
+
 class BRDF:
-    """Base class: subclasses implement ``__call__(wi, wo, n) -> (m,)`` in 1/sr.
+    """Base class: subclasses implement ``from_cosines`` (f_r in 1/sr) and ``shade``.
 
     ``lobe_width_rad`` is the angular half-width of the narrowest specular lobe in half-vector
     space (None for purely diffuse BRDFs); renderers use it to size glint sampling.
@@ -128,9 +172,29 @@ class BRDF:
         """f_r in 1/sr from cos(n, wi), cos(n, wo) and cos(wi, wo) (broadcastable arrays)."""
         raise NotImplementedError
 
-    def shade(self, cos_i, cos_o, cos_io):
-        """f_r as the renderers apply it: diffuse terms need only ``cos_i > 0`` (module docstring)."""
-        return self.from_cosines(cos_i, cos_o, cos_io)
+    def shade(self, cos_i, cos_o, cos_io, spec_cos_i=None, spec_cos_o=None):  # pragma: no cover - interface
+        """f_r cos(i) as the renderers apply it (module docstring).
+
+        Parameters
+        ----------
+        cos_i, cos_o : cosines of the Sun and the observer to the shading normal.
+        cos_io : cosine between the Sun and the observer.
+        spec_cos_i, spec_cos_o : optional, the same to the normal specular lobes are evaluated
+            about (:func:`valid_reflection_normal`); None evaluates them about the shading
+            normal, cut below its horizon.
+        """
+        raise NotImplementedError
+
+
+def _specular_cosines(cos_i, cos_o, spec_cos_i, spec_cos_o):
+    """The cosines a specular lobe is evaluated with, and where it may be non-zero.
+
+    With a bent normal, light must also be above the shading normal's horizon (Cycles rejects
+    light that the bent and the shading normal see on different sides: its bump shadowing term).
+    """
+    if spec_cos_i is None:
+        return cos_i, cos_o, (cos_i > 0.0) & (cos_o > 0.0)
+    return spec_cos_i, spec_cos_o, (cos_i > 0.0) & (spec_cos_i > 0.0) & (spec_cos_o > 0.0)
 
 
 @dataclass(frozen=True)
@@ -150,17 +214,18 @@ class Lambertian(BRDF):
     def from_cosines(self, cos_i, cos_o, cos_io):
         return np.where((cos_i > 0.0) & (cos_o > 0.0), self.albedo / np.pi, 0.0)
 
-    def shade(self, cos_i, cos_o, cos_io):
-        return np.where(cos_i > 0.0, self.albedo / np.pi, 0.0)
+    def shade(self, cos_i, cos_o, cos_io, spec_cos_i=None, spec_cos_o=None):
+        return self.albedo / np.pi * np.maximum(cos_i, 0.0)
 
 
-def _ggx_lobe(ci, co, cos_io, alpha, masking):
+def _ggx_lobe(ci, co, cos_io, alpha, masking, valid=None):
     """D G / (4 cos i cos o) and cos(h, wi) for the valid pairs; zero elsewhere.
 
     With h = (wi + wo) / |wi + wo| and |wi + wo| = sqrt(2 + 2 cos_io):
     n.h = (cos_i + cos_o) / |wi + wo| and h.wi = |wi + wo| / 2.
     """
-    valid = (ci > 0.0) & (co > 0.0)
+    if valid is None:
+        valid = (ci > 0.0) & (co > 0.0)
     h_len = np.sqrt(np.maximum(2.0 + 2.0 * cos_io, 0.0))
     cos_nh = np.clip((ci + co) / np.where(h_len > 0.0, h_len, 1.0), 0.0, 1.0)
     cos_hi = np.clip(0.5 * h_len, 0.0, 1.0)
@@ -177,6 +242,32 @@ def _ggx_lobe(ci, co, cos_io, alpha, masking):
 
 
 @dataclass(frozen=True)
+class _MultipleScattering:
+    """Cycles' energy compensation of a GGX lobe whose mean single-scattering Fresnel is ``fss``.
+
+    The lobe is multiplied by ``1 + Fms (1 - E) / E`` with E the GGX albedo at the view cosine
+    and Fms = fss E_avg / (1 - fss (1 - E_avg)) (Kulla and Conty, as ``microfacet_ggx_preserve_energy``);
+    ``darkening`` is what Cycles multiplies the closure's weight by, E + Fms (1 - E).
+    """
+
+    roughness: float
+    fss: float
+
+    @property
+    def fms(self):
+        e_avg = ggx_average_albedo(self.roughness)
+        return self.fss * e_avg / (1.0 - self.fss * (1.0 - e_avg))
+
+    def factor(self, mu):
+        e = ggx_albedo(self.roughness, mu)
+        return 1.0 + self.fms * (1.0 - e) / np.maximum(e, 1e-6)
+
+    def darkening(self, mu):
+        e = ggx_albedo(self.roughness, mu)
+        return e + self.fms * (1.0 - e)
+
+
+@dataclass(frozen=True)
 class GGX(BRDF):
     """Blender's Glossy BSDF (GGX, no Fresnel): f = color D G / (4 cos i cos o).
 
@@ -185,11 +276,14 @@ class GGX(BRDF):
     color : float in [0, 1], the reflectance Blender calls Color.
     roughness : float in [0, 1], Blender's Roughness; alpha = roughness**2.
     masking : {"height-correlated", "separable"}, the Smith term (see module docstring).
+    distribution : {"GGX", "MULTI_GGX"}, Blender's distribution: single scattering, or with
+        Cycles' multiple-scattering energy compensation (Blender 5's default for new nodes).
     """
 
     color: float
     roughness: float
     masking: str = "height-correlated"
+    distribution: str = "GGX"
 
     def __post_init__(self):
         _check_unit_interval("color", self.color, "GGX")
@@ -201,6 +295,9 @@ class GGX(BRDF):
             )
         if self.masking not in MASKING_MODES:
             raise ValueError(f"GGX: masking={self.masking!r} is unknown; use one of {MASKING_MODES}")
+        _check_distribution(self.distribution, "GGX")
+        if self.distribution == "MULTI_GGX" and self.masking != "height-correlated":
+            raise ValueError("GGX: distribution='MULTI_GGX' compensates the height-correlated masking only")
 
     @property
     def alpha(self) -> float:
@@ -210,9 +307,19 @@ class GGX(BRDF):
     def lobe_width_rad(self) -> float:
         return self.alpha
 
+    def _scattering(self, cos_o):
+        if self.distribution == "GGX":
+            return 1.0
+        return _MultipleScattering(self.roughness, self.color).factor(cos_o)
+
     def from_cosines(self, cos_i, cos_o, cos_io):
         value, _ = _ggx_lobe(cos_i, cos_o, cos_io, self.alpha, self.masking)
-        return self.color * value
+        return self.color * value * self._scattering(cos_o)
+
+    def shade(self, cos_i, cos_o, cos_io, spec_cos_i=None, spec_cos_o=None):
+        ci, co, valid = _specular_cosines(cos_i, cos_o, spec_cos_i, spec_cos_o)
+        value, _ = _ggx_lobe(ci, co, cos_io, self.alpha, self.masking, valid)
+        return self.color * value * np.maximum(ci, 0.0) * self._scattering(co)
 
 
 @dataclass(frozen=True)
@@ -224,9 +331,11 @@ class Principled(BRDF):
     base_color : float in [0, 1], diffuse albedo of the dielectric part, F0 of the metallic part.
     metallic : float in [0, 1], mix between the dielectric and the metallic model.
     roughness : float in [0, 1], alpha = roughness**2 for both specular lobes.
-    specular_ior_level : float >= 0, Blender's Specular IOR Level (0.5 keeps the IOR's F0;
-        other values scale F0 by ``2 * level``).
+    specular_ior_level : float in [0, 1], Blender's Specular IOR Level (0.5 keeps the IOR's F0;
+        other values scale F0 by ``2 * level`` and take the IOR of that F0, as Cycles does).
     ior : float > 1, index of refraction of the dielectric coating.
+    distribution : {"GGX", "MULTI_GGX"}, as for :class:`GGX`; with "MULTI_GGX" both lobes are
+        energy-compensated and the diffuse base loses what the compensated lobe gains.
     """
 
     base_color: float
@@ -234,7 +343,7 @@ class Principled(BRDF):
     roughness: float = 0.5
     specular_ior_level: float = 0.5
     ior: float = 1.5
-    _albedo_table: tuple = field(init=False, repr=False, compare=False)
+    distribution: str = "GGX"
 
     def __post_init__(self):
         _check_unit_interval("base_color", self.base_color, "Principled")
@@ -248,7 +357,7 @@ class Principled(BRDF):
             raise ValueError(f"Principled: specular_ior_level={self.specular_ior_level!r} is outside [0, 1]")
         if not (math.isfinite(self.ior) and 1.0 < self.ior < 4.0):
             raise ValueError(f"Principled: ior={self.ior!r} is outside (1, 4); give a dielectric index of refraction")
-        object.__setattr__(self, "_albedo_table", _specular_albedo_table(self.alpha, self.f0, self.ior))
+        _check_distribution(self.distribution, "Principled")
 
     @property
     def alpha(self) -> float:
@@ -269,81 +378,74 @@ class Principled(BRDF):
         """Normal-incidence reflectance of the dielectric specular lobe."""
         return min(_f0_from_ior(self.ior) * 2.0 * self.specular_ior_level, 1.0)
 
-    def specular(self, wi, wo, n):
-        """The dielectric specular lobe alone (reciprocal), shape (m,)."""
-        return self._specular(_dot(wi, n), _dot(wo, n), _dot(wi, wo))
+    @property
+    def eta(self) -> float:
+        """The index of refraction whose Fresnel curve the specular lobe follows (Cycles'
+        ``ior_from_F0`` of :attr:`f0` when ``specular_ior_level`` is not 0.5); 1 means no lobe."""
+        if self.specular_ior_level == 0.5:
+            return self.ior
+        root = math.sqrt(min(max(self.f0, 0.0), 0.99))
+        return (1.0 + root) / (1.0 - root)
 
-    def _specular(self, cos_i, cos_o, cos_io):
-        lobe, cos_hi = _ggx_lobe(cos_i, cos_o, cos_io, self.alpha, "height-correlated")
-        return lobe * _generalized_fresnel(cos_hi, self.f0, self.ior)
+    def _fresnel(self, cos_hi):
+        """Cycles' generalised Schlick with a negative exponent: the dielectric curve of
+        :attr:`eta`, remapped so that normal incidence gives :attr:`f0` and grazing 1."""
+        f0_eta = _f0_from_ior(self.eta)
+        s = np.clip((dielectric_fresnel(cos_hi, self.eta) - f0_eta) / (1.0 - f0_eta), 0.0, 1.0)
+        return self.f0 + (1.0 - self.f0) * s
+
+    def _dielectric_scattering(self):
+        f0_eta = _f0_from_ior(self.eta)
+        mean = min(max((fresnel_mean_fit(self.eta) - f0_eta) / (1.0 - f0_eta), 0.0), 1.0)
+        return _MultipleScattering(self.roughness, self.f0 + (1.0 - self.f0) * mean)
+
+    def specular(self, wi, wo, n):
+        """The dielectric specular lobe alone, shape (m,)."""
+        ci, co = _dot(wi, n), _dot(wo, n)
+        return self._specular(ci, co, _dot(wi, wo), (ci > 0.0) & (co > 0.0))
+
+    def _specular(self, ci, co, cos_io, valid):
+        if self.eta == 1.0:
+            return np.zeros(np.broadcast(ci, co, cos_io).shape)
+        lobe, cos_hi = _ggx_lobe(ci, co, cos_io, self.alpha, "height-correlated", valid)
+        value = lobe * self._fresnel(cos_hi)
+        if self.distribution == "MULTI_GGX":
+            value = value * self._dielectric_scattering().factor(co)
+        return value
 
     def diffuse_weight(self, cos_o):
-        """1 - E_spec(cos_o): the share of light left to the diffuse base, shape (m,)."""
-        grid, albedo = self._albedo_table
-        return 1.0 - np.interp(np.clip(cos_o, grid[0], 1.0), grid, albedo)
+        """The diffuse base's weight at view cosine ``cos_o`` (to the specular lobe's normal):
+        ``1 - d (F0 + (1 - F0) s)``, Cycles' ``closure_layering_weight`` of its albedo estimate
+        of the specular lobe, shape of ``cos_o``."""
+        cos_o = np.asarray(cos_o)
+        if self.eta == 1.0:
+            return np.ones(cos_o.shape)
+        albedo = self.f0 + (1.0 - self.f0) * dielectric_fresnel_mean(self.roughness, cos_o, self.eta)
+        if self.distribution == "MULTI_GGX":
+            albedo = albedo * self._dielectric_scattering().darkening(cos_o)
+        return np.clip(1.0 - albedo, 0.0, 1.0)
 
     def from_cosines(self, cos_i, cos_o, cos_io):
-        return self._evaluate(cos_i, cos_o, cos_io, (cos_i > 0.0) & (cos_o > 0.0))
+        valid = (cos_i > 0.0) & (cos_o > 0.0)
+        return self._evaluate(cos_i, cos_io, cos_i, cos_o, valid, np.where(valid, 1.0, 0.0))
 
-    def shade(self, cos_i, cos_o, cos_io):
-        return self._evaluate(cos_i, cos_o, cos_io, cos_i > 0.0)
+    def shade(self, cos_i, cos_o, cos_io, spec_cos_i=None, spec_cos_o=None):
+        ci, co, valid = _specular_cosines(cos_i, cos_o, spec_cos_i, spec_cos_o)
+        return self._evaluate(cos_i, cos_io, ci, co, valid, np.maximum(cos_i, 0.0), np.maximum(ci, 0.0))
 
-    def _evaluate(self, ci, co, cos_io, diffuse_valid):
-        dielectric = self._specular(ci, co, cos_io) + np.where(
-            diffuse_valid, self.diffuse_weight(np.maximum(co, 0.0)) * self.base_color / np.pi, 0.0
-        )
+    def _evaluate(self, cos_i, cos_io, ci, co, valid, diffuse_cosine, specular_cosine=1.0):
+        """(1 - m) (specular + weighted base) + m metallic, each lobe times its cosine factor."""
+        base = np.where(cos_i > 0.0, self.base_color / np.pi, 0.0) * self.diffuse_weight(np.clip(co, 0.0, 1.0))
+        dielectric = self._specular(ci, co, cos_io, valid) * specular_cosine + base * diffuse_cosine
         if self.metallic == 0.0:
             return dielectric
-        lobe, cos_hi = _ggx_lobe(ci, co, cos_io, self.alpha, "height-correlated")
-        schlick = self.base_color + (1.0 - self.base_color) * (1.0 - cos_hi) ** 5
-        return (1.0 - self.metallic) * dielectric + self.metallic * lobe * schlick
-
-
-def _generalized_fresnel(cos_hi, f0, ior):
-    """Cycles' generalised Schlick with a negative exponent: the real dielectric curve remapped
-    so that normal incidence gives ``f0`` and grazing gives 1."""
-    f0_ior = _f0_from_ior(ior)
-    s = np.clip((fresnel_dielectric(cos_hi, ior) - f0_ior) / (1.0 - f0_ior), 0.0, 1.0)
-    return f0 + (1.0 - f0) * s
-
-
-@lru_cache(maxsize=64)
-def _specular_albedo_table(alpha, f0, ior, n_cos=64):
-    """Directional albedo of the Principled specular lobe over cos(o), by quadrature.
-
-    Sampling the half vector with the GGX pdf D(h) cos(h) turns the albedo integral into the
-    mean of G F (h.o) / ((h.n) cos o) over a deterministic grid in the GGX CDF, which resolves
-    narrow and wide lobes alike.
-    """
-    cos_grid = np.linspace(0.02, 1.0, n_cos)
-    n_t, n_phi = 160, 96
-    t = (np.arange(n_t) + 0.5) / n_t
-    phi = (np.arange(n_phi) + 0.5) / n_phi * 2.0 * np.pi
-    tan_h = alpha * np.sqrt(t / (1.0 - t))
-    cos_h = 1.0 / np.sqrt(1.0 + tan_h**2)
-    sin_h = tan_h * cos_h
-    h = np.stack(
-        np.broadcast_arrays(
-            sin_h[:, None] * np.cos(phi)[None, :],
-            sin_h[:, None] * np.sin(phi)[None, :],
-            cos_h[:, None] * np.ones_like(phi)[None, :],
-        ),
-        axis=-1,
-    ).reshape(-1, 3)
-    albedo = np.empty(n_cos)
-    for index, c in enumerate(cos_grid):
-        wo = np.array([math.sqrt(1.0 - c * c), 0.0, c])
-        cos_ho = h @ wo
-        wi = 2.0 * cos_ho[:, None] * h - wo
-        ci = wi[:, 2]
-        ok = (ci > 0.0) & (cos_ho > 0.0)
-        lam_i = smith_lambda(np.where(ok, ci, 1.0), alpha)
-        lam_o = smith_lambda(np.full_like(ci, c), alpha)
-        g = 1.0 / (1.0 + lam_i + lam_o)
-        fres = _generalized_fresnel(np.clip(cos_ho, 0.0, 1.0), f0, ior)
-        weight = g * fres * cos_ho / (h[:, 2] * c)
-        albedo[index] = np.mean(np.where(ok, weight, 0.0))
-    return cos_grid, albedo
+        lobe, cos_hi = _ggx_lobe(ci, co, cos_io, self.alpha, "height-correlated", valid)
+        metal = lobe * (self.base_color + (1.0 - self.base_color) * (1.0 - cos_hi) ** 5)
+        if self.distribution == "MULTI_GGX":
+            metal = metal * _MultipleScattering(
+                self.roughness, self.base_color + (1.0 - self.base_color) / 21.0
+            ).factor(co)
+        return (1.0 - self.metallic) * dielectric + self.metallic * metal * specular_cosine
 
 
 def directional_albedo(brdf, cos_o, n_theta=256, n_phi=128):

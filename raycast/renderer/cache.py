@@ -52,16 +52,20 @@ from scipy.spatial import ConvexHull, QhullError, cKDTree
 from tqdm.auto import tqdm
 
 from raycast.renderer import _cache_kernels
-from raycast.renderer.rays import check_directions, open3d_scene, sun_disk_directions, sun_samples_for
+from raycast.renderer.rays import check_directions, open3d_scene, orthonormal_basis, sun_samples_for
 from raycast.renderer.scene import Scene
+from raycast.renderer.shading import disk_shading
 
 __all__ = ["SceneCache", "cube_grid_directions", "cube_grid_weights"]
 
-_MAX_RAYS_PER_BATCH = 2_000_000
+# Rays per batch of the build's visibility casting (bounds its buffers, ~20 MB with Open3D's copies).
+_MAX_BUILD_RAYS = 400_000
 # Halvings per triangle at most: a piece is then 1/2**(_MAX_BISECTIONS/2) of the triangle's size.
 _MAX_BISECTIONS = 24
 # Groups of at most this many occludable elements keep their visibility columns as they are.
 _FACTOR_MIN_ELEMENTS = 4
+# A group is factorised only into fewer columns than its elements over this (_visibility_factors).
+_FACTOR_ELEMENTS_PER_COLUMN = 8
 # Normals are grouped in bins of the material's normal step divided by this.
 _MERGE_FRACTION = 3.0
 # Lobes whose share of the reflectance is at most this are weak (see _normal_step_rad).
@@ -360,29 +364,34 @@ class SceneCache:
         # never negative; the factors' float32 rounding can make it -1e-7), and the mean shading
         # normal of its groups weighted by that area in each frame (so a class shared by faces
         # that are gated or shadowed differently is shaded where its light comes from).
-        area, normal = _cache_kernels.class_sums(
+        area, normal, geo = _cache_kernels.class_sums(
             weight, pose.normal_geo, pose.normal_shade, pose.group_class, sun32, obs32, pose.n_classes
         )
         total = np.zeros(m)
-        # One BRDF evaluation per material, on the (class, frame) pairs with light.
+        bend = self.scene.specular_normals == "cycles"
+        sun_u, sun_v = orthonormal_basis(sun)
+        # One BRDF evaluation per material, on the (class, frame) pairs with light, at the
+        # class's mean shading and geometric normals (raycast.renderer.shading.disk_shading).
         for material, begin, end in pose.material_blocks:
             frames, classes = np.nonzero(area[:, begin:end])
             if len(classes) == 0:
                 continue
             classes += begin
-            n = normal[frames, classes]
+            n = normal[frames, classes].astype(float)
             n /= np.linalg.norm(n, axis=1, keepdims=True)
-            cos_o = np.einsum("pk,pk->p", n, obs32[frames])
-            disk, disk_weights = sun_disk_directions(sun, self.sun_samples[material])
-            shading = np.zeros(len(classes), dtype=np.float32)
-            for sun_dir, disk_weight in zip(disk.astype(np.float32), disk_weights):
-                cos_s = np.einsum("pk,pk->p", n, sun_dir[frames])
-                cos_so = np.einsum("mk,mk->m", sun_dir, obs32)[frames]
-                shading += (
-                    np.float32(disk_weight)
-                    * self.scene.brdfs[material].shade(cos_s, cos_o, cos_so)
-                    * np.maximum(cos_s, np.float32(0.0))
-                )
+            g = geo[frames, classes].astype(float)
+            g /= np.linalg.norm(g, axis=1, keepdims=True)
+            shading = disk_shading(
+                self.scene.brdfs[material],
+                self.sun_samples[material],
+                n,
+                g,
+                obs[frames],
+                sun[frames],
+                sun_u[frames],
+                sun_v[frames],
+                bend,
+            )
             total += np.bincount(frames, weights=area[frames, classes] * shading, minlength=m)
         return total
 
@@ -491,7 +500,7 @@ def _add_bit_weight(out, pose, sun, obs, grid_size, edge_weights):
     )
     if len(frame):
         origins = _ray_origins(pose, edge_weights)
-        rays = _cache_kernels.pair_rays(need, frame, element, origins, sun32, obs32)
+        rays = _cache_kernels.pair_rays(need, frame, element, origins, pose.raw_normals, sun32, obs32)
         occluded = _raycaster(pose).test_occlusions(rays).numpy()
         _cache_kernels.add_pairs(
             out,
@@ -574,7 +583,7 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quant
     el_corners, el_normals = np.concatenate(el_corners), np.concatenate(el_normals)
     el_tri, el_side = np.concatenate(el_tri), np.concatenate(el_side)
     el_exposed = exposed[el_tri, el_side]
-    visibility = np.zeros((len(directions), 0), dtype=np.uint8)
+    visibility = np.zeros((0, -(-len(directions) // 8)), dtype=np.uint8)
     n_rays = 0
     # Two grid spacings: every node a grazing direction interpolates from.
     band = math.sin(2.0 * _grid_spacing_rad(directions))
@@ -609,10 +618,10 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quant
     if len(cast):
         seen = np.zeros(len(cast), dtype=bool)
         blocked = np.zeros(len(cast), dtype=bool)
-        for begin in range(0, len(cast), 4096):  # in chunks: (directions, elements) arrays are large
-            sl = slice(begin, begin + 4096)
+        for begin in range(0, len(cast), 512):  # in chunks: (directions, elements) arrays are large
+            sl = slice(begin, begin + 512)
             upper = (directions @ parent_geo[cast[sl]].T) > 0.0
-            open_ = visibility[:, sl].astype(bool)
+            open_ = _unpacked(visibility[sl], len(directions)).astype(bool)
             seen[sl] = (open_ & upper).any(axis=0)
             blocked[sl] = (~open_ & upper).any(axis=0)
         of_element = el["parent"].copy()
@@ -666,7 +675,7 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quant
     pair_area = np.bincount(pair_of.reshape(-1), weights=weight_area[occl], minlength=len(pairs))
     starts = np.flatnonzero(np.r_[True, np.diff(pairs[:, 0]) != 0]) if len(pairs) else np.zeros(0, int)
     factors, factor_starts, factorised = _visibility_factors(
-        visibility, pairs[:, 1], pair_area, starts, factor_tolerance
+        visibility, len(directions), pairs[:, 1], pair_area, starts, factor_tolerance
     )
 
     # Classes are numbered in material order (material leads their key): one block each.
@@ -697,8 +706,12 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quant
     # Bits are cleared for directions further below an element's plane than the horizon band
     # (_visibility leaves them set for the cosine gate): an element facing well away from the
     # Sun or the observer then has no bit set around it, and the run time passes over it.
-    above = directions @ raw_geo.T > -band
-    raw_bits = _cache_kernels.pack_words(visibility[:, raw_columns].astype(bool) & above)
+    raw_bits = np.zeros((len(directions), -(-len(raw_columns) // 64)), dtype=np.uint64)
+    for begin in range(0, len(raw_columns), 8 * 64):  # whole words at a time
+        columns = raw_columns[begin : begin + 8 * 64]
+        above = directions @ raw_geo[begin : begin + 8 * 64].T > -band
+        words = _cache_kernels.pack_words(_unpacked(visibility[columns], len(directions)).astype(bool) & above)
+        raw_bits[:, begin // 64 : begin // 64 + words.shape[1]] = words
     return _Pose(
         normal_shade.astype(np.float32),
         group_class.astype(np.int32),
@@ -754,25 +767,26 @@ def _split_where_partly_visible(mesh, corners, normals, tri, side, exposed, n_ge
     rays.
 
     Returns the elements' corners, normals, tri, side and exposed flags after splitting (the
-    non-exposed ones first), the (d, e) uint8 visibility of the non-exposed ones and the rays
-    cast.
+    non-exposed ones first), the visibility bits of the non-exposed ones (element-major, see
+    :func:`_visibility`) and the rays cast.
     """
     cast = np.flatnonzero(~exposed)
     geo = _side_normals(n_geo, tri, side)
+    raycaster, offset = open3d_scene(mesh), _ray_offset_m(mesh)
     quarter_corners, quarter_normals = _quarters(corners[cast], normals[cast])
     coarse = cube_grid_directions(max(4, _grid_size_of(directions) // 4))
     quarter_points = quarter_corners.mean(axis=2)
     split = np.zeros(len(cast), dtype=bool)
     n_rays = 0
-    chunk = max(1, _MAX_RAYS_PER_BATCH // (4 * len(coarse)))
+    chunk = max(1, _MAX_BUILD_RAYS // (4 * len(coarse)))
     for begin in range(0, len(cast), chunk):
         sl = slice(begin, begin + chunk)
         element_geo = geo[cast[sl]]
-        vis, rays = _visibility(
-            mesh, quarter_points[sl].reshape(-1, 3), np.repeat(element_geo, 4, axis=0), coarse, band
+        bits, rays = _visibility(
+            raycaster, offset, quarter_points[sl].reshape(-1, 3), np.repeat(element_geo, 4, axis=0), coarse, band
         )
         n_rays += rays
-        vis = vis.reshape(len(coarse), -1, 4)
+        vis = _unpacked(bits, len(coarse)).reshape(len(coarse), -1, 4)
         upper = (coarse @ element_geo.T) > 0.0
         differ = (vis.min(axis=2) != vis.max(axis=2)) & upper
         split[sl] = differ.sum(axis=0) > _SPLIT_FRACTION * np.maximum(upper.sum(axis=0), 1)
@@ -785,14 +799,14 @@ def _split_where_partly_visible(mesh, corners, normals, tri, side, exposed, n_ge
     new_exposed = np.r_[np.zeros(n_cast, dtype=bool), np.ones(int(exposed.sum()), dtype=bool)]
     points = new_corners[:n_cast].mean(axis=1)
     new_geo = _side_normals(n_geo, new_tri[:n_cast], new_side[:n_cast])
-    visibility = np.ones((len(directions), n_cast), dtype=np.uint8)
+    visibility = np.empty((n_cast, -(-len(directions) // 8)), dtype=np.uint8)
     bar = None
     if progress:
         bar = tqdm(total=n_cast, unit="element", desc="visibility")
-    chunk = max(1, _MAX_RAYS_PER_BATCH // len(directions))
+    chunk = max(1, 16 * _MAX_BUILD_RAYS // len(directions))
     for begin in range(0, n_cast, chunk):
         sl = slice(begin, begin + chunk)
-        visibility[:, sl], rays = _visibility(mesh, points[sl], new_geo[sl], directions, band)
+        visibility[sl], rays = _visibility(raycaster, offset, points[sl], new_geo[sl], directions, band)
         n_rays += rays
         if bar is not None:
             bar.update(len(points[sl]))
@@ -816,81 +830,158 @@ def _grid_spacing_rad(directions):
     return math.pi / 2.0 / _grid_size_of(directions)
 
 
-def _visibility_factors(visibility, columns_of_pairs, area, starts, tolerance):
+class _GroupMatrix:
+    """A group's ``M^T = diag(sqrt(A)) V^T`` (e, d), read from the element-major visibility bits
+    a block of rows at a time, so no e x d float array is ever held."""
+
+    _ROWS = 256
+
+    def __init__(self, visibility, columns, weights, n_directions):
+        self.visibility, self.columns, self.n_directions = visibility, columns, n_directions
+        self.roots = np.sqrt(weights).astype(np.float32)
+
+    def _blocks(self):
+        for begin in range(0, len(self.columns), self._ROWS):
+            rows = slice(begin, begin + self._ROWS)
+            bits = np.unpackbits(self.visibility[self.columns[rows]], axis=1, count=self.n_directions)
+            yield rows, bits.astype(np.float32) * self.roots[rows, None]
+
+    def times(self, x):
+        """M^T x: (d, k) -> (e, k)."""
+        out = np.empty((len(self.columns), x.shape[1]), dtype=np.float32)
+        for rows, block in self._blocks():
+            out[rows] = block @ x
+        return out
+
+    def transposed_times(self, y):
+        """M y: (e, k) -> (d, k)."""
+        out = np.zeros((self.n_directions, y.shape[1]), dtype=np.float32)
+        for rows, block in self._blocks():
+            out += block.T @ y[rows]
+        return out
+
+    def row_norms(self):
+        """(d,) |M(s)|^2 = sum over elements of A_e V_e(s)."""
+        out = np.zeros(self.n_directions)
+        for _, block in self._blocks():
+            out += (block.astype(np.float64) ** 2).sum(axis=0)
+        return out
+
+
+def _group_basis(matrix, n_elements, budget, rng):
+    """(e, r) orthonormal Q with ``max_s |M(s)|^2 - |M(s) Q|^2 <= budget`` and r < e / 8, or None.
+
+    Randomised range finding (a Gaussian sketch of M's row space, two power iterations), the
+    sketch then rotated to M's singular directions so its columns fall in importance and the
+    leading r are kept; tried with 16, 32, ... columns.
+    """
+    row_norm2 = matrix.row_norms()
+    rank = min(16, max(1, n_elements // 16))
+    while rank < n_elements / _FACTOR_ELEMENTS_PER_COLUMN:
+        width = min(rank + 8, n_elements)
+        sketch = matrix.times(rng.standard_normal((matrix.n_directions, width)).astype(np.float32))
+        for _ in range(2):
+            sketch = matrix.times(matrix.transposed_times(np.linalg.qr(sketch)[0]))
+        basis = np.linalg.qr(sketch.astype(np.float64))[0]
+        projected = matrix.transposed_times(basis.astype(np.float32)).astype(np.float64)  # (d, k) = M Q
+        # M's singular directions within the sketch: eigenvectors of the k x k Gram matrix.
+        rotation = np.linalg.eigh(projected.T @ projected)[1][:, ::-1]
+        basis = basis @ rotation
+        projected = projected @ rotation
+        # worst[r - 1] = max over directions of |R(s)|^2 when the first r columns are kept.
+        np.square(projected, out=projected)
+        np.cumsum(projected, axis=1, out=projected)
+        np.subtract(row_norm2[:, None], projected, out=projected)
+        good = np.flatnonzero(projected.max(axis=0) <= budget)
+        if len(good) and good[0] + 1 < n_elements / _FACTOR_ELEMENTS_PER_COLUMN:
+            return basis[:, : int(good[0]) + 1]
+        rank *= 2
+    return None
+
+
+def _visibility_factors(visibility, n_directions, columns_of_pairs, area, starts, tolerance, seed=0):
     """Compress each group's visibility into a few columns whose products give its lit-and-seen area.
 
     For a group (pieces sharing material and normals) the run time needs only
     ``W(s, o) = sum_e A_e V_e(s) V_e(o) = M(s) . M(o)`` with ``M = V diag(sqrt(A))`` (d, e).
-    With ``M^T M = Q L Q^T`` and ``P = M Q`` (columns by falling eigenvalue),
-    ``M(s) . M(o) = P(s) . P(o)`` exactly; keeping the first r columns leaves the error
-    ``R(s) . R(o)`` with ``|R(s)|^2`` the sum of the dropped ``P(s)**2``. r is the smallest
-    count with ``max_s |R(s)|^2 <= tolerance * sum(A)`` over the grid directions (bilinear
-    interpolation mixes rows convexly, so the bound holds between them too): the group's
-    W is then off by at most ``tolerance`` of its area. Flat panels whose shadows are a few
-    moving edges need tens of columns instead of thousands of elements. A group is factorised
-    only when that keeps fewer than half its columns; the others (a few elements each, as on a
-    smooth-shaded tube whose pieces spread over many groups) keep their elements' visibility.
+    For any e x r matrix Q with orthonormal columns and ``P = M Q``,
+    ``M(s) . M(o) = P(s) . P(o) + R(s) . R(o)`` with ``R = M (I - Q Q^T)`` and
+    ``|R(s)|^2 = |M(s)|^2 - |P(s)|^2`` exactly; r is the smallest count with
+    ``max_s |R(s)|^2 <= tolerance * sum(A)`` over the grid directions (bilinear interpolation
+    mixes rows convexly, so the bound holds between them too): the group's W is then off by at
+    most ``tolerance`` of its area. Q comes from a randomised range finder (Halko, Martinsson
+    and Tropp 2011; :func:`_group_basis`). A group is factorised only when that keeps fewer
+    than one column per ``_FACTOR_ELEMENTS_PER_COLUMN`` elements (a column of 32-bit floats
+    holds as much as 32 elements' visibility bits); the others (a few elements each, as on a
+    smooth-shaded tube whose pieces spread over many groups) keep their elements' bits. The
+    work is O(d e r) per group and its memory d x r plus a block of rows of M, never the e x e
+    Gram matrix of an eigensolver nor a float copy of the visibility; the factors are
+    allocated once, after every group's rank is known.
 
     Parameters
     ----------
-    visibility : (d, e) uint8, elements' visibility.
+    visibility : (E, ceil(d / 8)) uint8, element-major visibility bits (:func:`_visibility`).
+    n_directions : int, d.
     columns_of_pairs : (p,) int, the element of each (group, element) pair, pairs sorted by group.
     area : (p,) float, the pairs' areas.
     starts : (k,) int, first pair of each group.
     tolerance : float, largest error of W as a fraction of the group's area.
+    seed : int, of the sketches (the result is deterministic).
 
     Returns
     -------
     factors : (d, r) float32, starts : (k',) int, first factor column of each factorised group,
     factorised : (k,) bool.
     """
+    rng = np.random.default_rng(seed)
     ends = np.r_[starts[1:], len(columns_of_pairs)].astype(int)
-    columns, new_starts, factorised, count = [], [], np.zeros(len(starts), dtype=bool), 0
+    bases, factorised = [], np.zeros(len(starts), dtype=bool)
     for index, (begin, end) in enumerate(zip(starts, ends)):
         if end - begin <= _FACTOR_MIN_ELEMENTS:
             continue
-        block = visibility[:, columns_of_pairs[begin:end]].astype(np.float64) * np.sqrt(area[begin:end])
-        eigenvalues, vectors = np.linalg.eigh(block.T @ block)
-        projected = block @ np.ascontiguousarray(vectors[:, ::-1])
-        # tail[:, r] = |R(s)|^2 when the first r columns are kept.
-        tail = np.cumsum((projected**2)[:, ::-1], axis=1)[:, ::-1]
-        worst = np.r_[tail.max(axis=0), 0.0]
-        keep = max(int(np.argmax(worst <= tolerance * area[begin:end].sum())), 1)
-        if keep >= 0.5 * (end - begin):
-            continue
-        factorised[index] = True
-        new_starts.append(count)
-        columns.append(projected[:, :keep].astype(np.float32))
-        count += keep
-    if not columns:
-        return np.zeros((visibility.shape[0], 0), dtype=np.float32), np.zeros(0, int), factorised
-    return np.ascontiguousarray(np.concatenate(columns, axis=1)), np.asarray(new_starts), factorised
+        matrix = _GroupMatrix(visibility, columns_of_pairs[begin:end], area[begin:end], n_directions)
+        basis = _group_basis(matrix, end - begin, tolerance * area[begin:end].sum(), rng)
+        if basis is not None:
+            factorised[index] = True
+            bases.append((matrix, basis.astype(np.float32)))
+    widths = [basis.shape[1] for _, basis in bases]
+    factors = np.empty((n_directions, sum(widths)), dtype=np.float32)
+    new_starts = np.r_[0, np.cumsum(widths)[:-1]].astype(int) if widths else np.zeros(0, int)
+    for (matrix, basis), first, width in zip(bases, new_starts, widths):
+        factors[:, first : first + width] = matrix.transposed_times(basis)
+    return factors, new_starts, factorised
 
 
-def _visibility(mesh, points, normals, directions, horizon_band):
-    """(d, e) uint8: 1 where the ray from element e toward direction d escapes the mesh.
+def _visibility(raycaster, offset_m, points, normals, directions, horizon_band):
+    """Element-major visibility bits: (e, ceil(d / 8)) uint8 (``numpy.packbits`` of each
+    element's d directions, 1 where the ray from element e toward direction d escapes the
+    mesh), and the number of rays cast.
 
     Directions within ``horizon_band`` (a sine) below an element's plane take the visibility
     of their mirror image above it, so that bilinear interpolation toward a grazing Sun or
     observer continues the visibility just above the horizon (a face grazed by the Sun along a
     stepped tube is shadowed by the steps; filling the band with 1 would light it). Directions
-    further below are not cast and set to 1: the cosine gate removes them.
+    further below are not cast and set to 1: the cosine gate removes them. Rays start
+    ``offset_m`` above their element and are cast into ``raycaster`` (the pose's Open3D scene);
+    they are built and their results stored by compiled loops, in batches of at most
+    ``_MAX_BUILD_RAYS``.
     """
-    raycaster = open3d_scene(mesh)
-    origins = (points + _ray_offset_m(mesh) * normals).astype(np.float32)
-    visibility = np.ones((len(directions), len(points)), dtype=np.uint8)
-    chunk = max(1, _MAX_RAYS_PER_BATCH // len(directions))
+    points = np.ascontiguousarray(points, dtype=float)
+    normals = np.ascontiguousarray(normals, dtype=float)
+    bits = np.full((len(points), -(-len(directions) // 8)), 255, dtype=np.uint8)
+    chunk = max(1, _MAX_BUILD_RAYS // len(directions))
     total = 0
     for begin in range(0, len(points), chunk):
-        elements = np.arange(begin, min(begin + chunk, len(points)))
-        height = directions @ normals[elements].T
-        d_idx, e_local = np.nonzero(height > -horizon_band)
-        e_idx = elements[e_local]
-        below = np.minimum(height[d_idx, e_local], 0.0)
-        cast = directions[d_idx] - 2.0 * below[:, None] * normals[e_idx]
-        cast /= np.linalg.norm(cast, axis=1, keepdims=True)
-        rays = np.concatenate([origins[e_idx], cast.astype(np.float32)], axis=1)
-        blocked = raycaster.test_occlusions(rays).numpy()
-        visibility[d_idx[blocked], e_idx[blocked]] = 0
-        total += len(d_idx)
-    return visibility, total
+        sl = slice(begin, begin + chunk)
+        rays, element, direction = _cache_kernels.visibility_rays(
+            points[sl], normals[sl], directions, horizon_band, offset_m
+        )
+        occluded = raycaster.test_occlusions(rays).numpy()
+        _cache_kernels.clear_bits(bits[sl], element, direction, occluded)
+        total += len(rays)
+    return bits, total
+
+
+def _unpacked(bits, n_directions):
+    """(d, e) uint8 visibility of element-major bits (e, ceil(d / 8)) from :func:`_visibility`."""
+    return np.unpackbits(bits, axis=1, count=n_directions).T

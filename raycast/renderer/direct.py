@@ -38,14 +38,16 @@ from scipy.spatial import ConvexHull, QhullError
 
 from raycast.renderer import _direct_kernels
 from raycast.renderer.rays import (
+    SUN_RADIUS_SINE,
     check_directions,
     open3d_scene,
     orthonormal_basis,
-    sun_disk_directions,
+    sun_fractions,
     sun_samples_for,
 )
 from raycast.renderer.refine import AdaptiveSampler, EdgeTopology, coarse_levels, surface_classes
 from raycast.renderer.scene import Scene
+from raycast.renderer.shading import disk_shading
 
 __all__ = ["DirectRenderer", "SAMPLINGS", "convex_groups"]
 
@@ -200,7 +202,8 @@ class DirectRenderer:
         n_u = np.floor((pu.max(axis=0) - start_u) / h).astype(np.int64) + 1
         n_v = np.floor((pv.max(axis=0) - start_v) / h).astype(np.int64) + 1
         cos_o, cos_s = _products(mesh.face_normals, obs_body), _products(mesh.face_normals, sun_body)
-        sunward = np.where(cos_o < 0.0, -cos_s, cos_s) > 0.0
+        # A seen side faces the Sun while any of the solar disk is above its plane.
+        sunward = np.where(cos_o < 0.0, -cos_s, cos_s) > -SUN_RADIUS_SINE
         if self.sampling == "raster":
             return self._raster(mesh, scene, sun_body, obs_body, pu, pv, start_u, start_v, n_u, n_v, cos_o, sunward)
         # Empty-space skipping: the grid is cut into tiles of TILE x TILE pixels and only tiles
@@ -311,11 +314,12 @@ class DirectRenderer:
             rest = _direct_kernels.flat_sums(frames, prim, blocked, smooth, flat_table, result)
             if len(rest):
                 frames, prim = frames[rest], prim[rest]
-                normals = mesh.face_normals[prim] * np.where(cos_o[prim, frames] < 0.0, -1.0, 1.0)[:, None]
+                geo_normals = mesh.face_normals[prim] * np.where(cos_o[prim, frames] < 0.0, -1.0, 1.0)[:, None]
+                normals = geo_normals.copy()
                 _direct_kernels.interpolated_normals(normals, np.arange(len(rest)), prim, uv[rest], mesh.corner_normals)
                 result += np.bincount(
                     frames,
-                    weights=self._radiance(mesh.material_index[prim], normals, frames, sun_body, obs_body),
+                    weights=self._radiance(mesh.material_index[prim], normals, frames, sun_body, obs_body, geo_normals),
                     minlength=len(result),
                 )
         return result * h * h
@@ -358,30 +362,43 @@ class DirectRenderer:
             total[flat] = flat_table[frames[flat], prim[flat]]
             lit, smooth = lit[smooth], smooth[smooth]
         # Only smooth-shaded triangles need the barycentric interpolation of corner normals.
+        geo_normals = normals[lit]
         _direct_kernels.interpolated_normals(normals, lit[smooth], prim, uv, mesh.corner_normals)
-        total[lit] = self._radiance(mesh.material_index[prim[lit]], normals[lit], frames[lit], sun_body, obs_body)
+        total[lit] = self._radiance(
+            mesh.material_index[prim[lit]], normals[lit], frames[lit], sun_body, obs_body, geo_normals
+        )
         return total, reached
 
-    def _radiance(self, materials, normals, frames, sun_body, obs_body):
-        """f(s, o, n) max(n . s, 0) averaged over the solar disk, (k,) for (k,) materials,
-        (k, 3) shading normals and (k,) frames of the (m, 3) Sun and observer directions."""
+    def _radiance(self, materials, normals, frames, sun_body, obs_body, geo_normals, smooth=True):
+        """Per hit f(s, o, n) cos(i) over the solar disk (:func:`raycast.renderer.shading.disk_shading`)
+        times the share of the disk above the face (:func:`raycast.renderer.rays.sun_fraction`),
+        (k,) for (k,) materials, (k, 3) shading normals, (k, 3) face normals turned toward the
+        observer and (k,) frames of the (m, 3) Sun and observer directions. On ``smooth`` hits
+        specular lobes are evaluated about the valid-reflection normal when the scene says so
+        (``Scene.specular_normals``)."""
         total = np.zeros(len(materials))
         mesh = self._state["mesh"]
+        bend = smooth and self.scene.specular_normals == "cycles"
+        sun_u, sun_v = orthonormal_basis(sun_body)
         for material in np.unique(materials):
             idx = np.flatnonzero(materials == material)
-            normal, frame = normals[idx], frames[idx]
-            wo = obs_body[frame]
-            disk, weights = sun_disk_directions(sun_body, self._state["sun_samples"][material])
-            cos_o = np.einsum("ij,ij->i", normal, wo)
-            for wi, weight in zip(disk, weights):
-                cos_i = np.einsum("ij,ij->i", normal, wi[frame])
-                value = mesh.brdfs[material].shade(cos_i, cos_o, np.einsum("ij,ij->i", wi, obs_body)[frame])
-                total[idx] += weight * value * np.maximum(cos_i, 0.0)
-        return total
+            frame = frames[idx]
+            total[idx] = disk_shading(
+                mesh.brdfs[material],
+                self._state["sun_samples"][material],
+                normals[idx],
+                geo_normals[idx],
+                obs_body[frame],
+                sun_body[frame],
+                sun_u[frame],
+                sun_v[frame],
+                bend,
+            )
+        return total * sun_fractions(np.einsum("ij,ij->i", geo_normals, sun_body[frames]))
 
     def _flat_radiance(self, sun_body, obs_body, triangles=None):
         """(m, t) radiance of every triangle, flat-shaded with its face normal turned toward
-        the observer, lit if its face is: what a flat triangle's hits share within a frame.
+        the observer, lit as much as its face is: what a flat triangle's hits share within a frame.
         With ``triangles`` (indices) only their columns are filled; the rest are zero."""
         mesh = self._state["mesh"]
         m, t = len(sun_body), len(mesh.face_normals)
@@ -390,8 +407,9 @@ class DirectRenderer:
         facing = np.where(np.einsum("mtj,mj->mt", normals, obs_body) < 0.0, -1.0, 1.0)
         normals = (normals * facing[..., None]).reshape(-1, 3)
         frames = np.repeat(np.arange(m), len(columns))
-        values = self._radiance(np.tile(mesh.material_index[columns], m), normals, frames, sun_body, obs_body)
-        values[np.einsum("ij,ij->i", normals, sun_body[frames]) <= 0.0] = 0.0
+        values = self._radiance(
+            np.tile(mesh.material_index[columns], m), normals, frames, sun_body, obs_body, normals, smooth=False
+        )
         table = np.zeros((m, t))
         table[:, columns] = values.reshape(m, len(columns))
         return table

@@ -11,6 +11,9 @@ records naming the Blender node they came from:
 ``{"blender_node": "Diffuse BSDF", "color": [r, g, b]}``
     -> :class:`raycast.renderer.brdf.Lambertian`
 
+Glossy and Principled records may name Blender's microfacet ``distribution``: ``"GGX"`` (the
+default here, single scattering) or ``"MULTI_GGX"`` (Blender 5's default for new nodes).
+
 Colours are Blender's linear RGB. A light curve is rendered in one band, so each colour is
 reduced to one number by a *channel*: ``"green"`` for V (the default; the green primary of
 linear sRGB peaks near 545 nm, the V band near 550 nm), ``"blue"`` for B, ``"red"`` for R and I,
@@ -75,6 +78,7 @@ def brdf_from_record(name: str, record: dict, channel: str = "green", mtl_ior: f
                 color=_reduce_color(record["color"], channel, where),
                 roughness=float(record["roughness"]),
                 masking=record.get("masking", "height-correlated"),
+                distribution=record.get("distribution", "GGX"),
             )
         if node in ("principled bsdf", "principled"):
             ior = record.get("ior", mtl_ior if mtl_ior is not None and mtl_ior > 1.0 else 1.5)
@@ -84,6 +88,7 @@ def brdf_from_record(name: str, record: dict, channel: str = "green", mtl_ior: f
                 roughness=float(record.get("roughness", 0.5)),
                 specular_ior_level=float(record.get("specular_ior_level", 0.5)),
                 ior=float(ior),
+                distribution=record.get("distribution", "GGX"),
             )
         if node in ("diffuse bsdf", "diffuse", "lambertian"):
             return Lambertian(albedo=_reduce_color(record["color"], channel, where))

@@ -32,7 +32,9 @@ from raycast.renderer import materials as materials_module
 from raycast.renderer.brdf import BRDF
 from raycast.renderer.meshio import read_mesh
 
-__all__ = ["Articulation", "Part", "Scene", "PosedMesh", "icosphere"]
+__all__ = ["Articulation", "Part", "Scene", "PosedMesh", "icosphere", "SPECULAR_NORMALS"]
+
+SPECULAR_NORMALS = ("cycles", "strict")
 
 
 def _unit(v, axis=-1):
@@ -328,6 +330,12 @@ class Scene:
     parameters : mapping of articulation parameter name to its current value (degrees).
     notes : tuple of str, what construction changed (dropped faces, repairs).
     name : str
+    specular_normals : {"cycles", "strict"}
+        How specular lobes treat smooth shading normals. ``"cycles"`` (default): about the
+        valid-reflection normal, bent from the shading normal toward the face until the view's
+        mirror direction clears the surface, as Blender Cycles does
+        (:func:`raycast.renderer.brdf.valid_reflection_normal`); ``"strict"``: about the shading
+        normal, with no specular light where the observer is below its horizon.
     """
 
     corners_m: np.ndarray
@@ -341,6 +349,13 @@ class Scene:
     parameters: Mapping = field(default_factory=dict)
     notes: tuple = ()
     name: str = "scene"
+    specular_normals: str = "cycles"
+
+    def __post_init__(self):
+        if self.specular_normals not in SPECULAR_NORMALS:
+            raise ValueError(
+                f"{self.name}: specular_normals={self.specular_normals!r} is unknown; use one of {SPECULAR_NORMALS}"
+            )
 
     # ------------------------------------------------------------------ constructors
     @classmethod
@@ -534,6 +549,11 @@ class Scene:
             if not (isinstance(value, (int, float, np.floating)) and math.isfinite(value)):
                 raise ValueError(f"{self.name}: {key}={value!r} must be a finite number of degrees")
         return replace(self, parameters={**self.parameters, **{k: float(v) for k, v in values.items()}})
+
+    def with_specular_normals(self, mode: str) -> Scene:
+        """A new scene whose specular lobes treat shading normals as ``mode`` says
+        (``"cycles"`` or ``"strict"``, see the class docstring)."""
+        return replace(self, specular_normals=mode)
 
     def with_brdfs(self, **brdfs) -> Scene:
         """A new scene with some materials' BRDFs replaced (``body_1=Lambertian(0.5)``)."""

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 
 import rsodb
 from rsodb.cli.archive_options import add_archive_option, fail, open_archive
@@ -91,6 +92,7 @@ def run(args: argparse.Namespace) -> int:
             store=not args.no_store,
             geometry=not args.no_geometry,
         )
+        damaged = archive.damaged(args.object)
     except (ValueError, TypeError, OSError) as error:
         return fail("periods", error)
     if args.json:
@@ -106,4 +108,10 @@ def run(args: argparse.Namespace) -> int:
             print(f"{pass_id:40s} failed: {error}")
         if survey.stored_as:
             print(f"stored {len(survey.results)} result(s) as '{survey.stored_as}'")
-    return 0 if survey.ok else 1
+    for item in damaged:
+        print(
+            f"rsodb periods: warning: {item.path} is damaged ({item.reason}); its passes were not searched. "
+            f"Run 'rsodb check --archive {args.archive} --repair'",
+            file=sys.stderr,
+        )
+    return 0 if survey.ok and not damaged else 1

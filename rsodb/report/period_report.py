@@ -27,7 +27,7 @@ from rsodb.campaign.period_survey import load_period_results
 from rsodb.periods.lightcurve import LightCurve
 from rsodb.periods.trend import DEFAULT_MIN_SPAN_DAYS, SIGNIFICANCE_SIGMA, trend_from_results
 from rsodb.periods.verdicts import VERDICTS
-from rsodb.plotting import file_pyplot
+from rsodb.plotting import file_pyplot, magnitude_label
 from rsodb.report.html import Document, Heading, Paragraph, Raw, Table, anchor, figure_from_matplotlib
 
 __all__ = [
@@ -179,7 +179,7 @@ def pass_figure(result, lightcurve):
     Every axis range comes from the data: a model that swings beyond them is clipped, not followed.
     """
     plt = file_pyplot()
-    fig = plt.figure(figsize=(12, 6.5))
+    fig = plt.figure(figsize=(12, 6.5), layout="constrained")
     grid = fig.add_gridspec(2, 2, height_ratios=(1, 1.1))
     ax_curve = fig.add_subplot(grid[0, :])
     ax_power = fig.add_subplot(grid[1, 0])
@@ -229,12 +229,11 @@ def pass_figure(result, lightcurve):
         folded.plot(ax_fold, model=(phase, model.phase_curve_mag(phase)), s=2)
         low, high = _limits(np.percentile(detrended, [0.2, 99.8]), margin=0.15, floor=0.05)
         ax_fold.set_ylim(high, low)
-        ax_fold.set_ylabel("magnitude - trend")
+        ax_fold.set_ylabel(magnitude_label(lightcurve.band, lightcurve.mag_convention, detrended=True))
         ax_fold.set_title(f"{result.verdict}: folded on {result.best_period_s:.4g} s ({result.n_cycles:.1f} cycles)")
     else:
         ax_fold.text(0.5, 0.5, "no period", ha="center", va="center", transform=ax_fold.transAxes)
         ax_fold.set_axis_off()
-    fig.tight_layout()
     return fig
 
 
@@ -320,7 +319,7 @@ def build_period_report(
     ValueError
         When the object has no stored period results.
     """
-    rows = archive.catalog(norad, band)
+    rows = archive.summaries(norad, band)
     results = load_period_results(archive, norad, name, band)
     if not results:
         raise ValueError(

@@ -1,0 +1,63 @@
+"""What a surface point reflects per unit solar irradiance: the BRDF over the solar disk, with
+shading normals treated as Blender Cycles treats them.
+
+:func:`disk_shading` is shared by the direct renderer (per hit) and the fast path (per shading
+class and frame): f_r(s, o) cos(i) averaged over a quadrature of the Sun's disk
+(:func:`raycast.renderer.rays.sun_disk_rule`), where
+
+* specular lobes on smooth-shaded surfaces are evaluated about the valid-reflection normal
+  (:func:`raycast.renderer.brdf.valid_reflection_normal`) unless the scene asks for the stricter
+  treatment (``Scene.specular_normals``);
+* a Sun whose disk is partly below the face's plane lights it from the centroid of the part
+  above (:func:`raycast.renderer.rays.risen_sun`); the share of the disk above the plane
+  (:func:`raycast.renderer.rays.sun_fraction`) is the caller's to apply, with the face's other
+  gates.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from raycast.renderer.brdf import valid_reflection_normal
+from raycast.renderer.rays import SUN_RADIUS_RAD, risen_suns, sun_disk_rule
+
+__all__ = ["disk_shading"]
+
+
+def _dot(a, b):
+    return np.einsum("ij,ij->i", a, b)
+
+
+def disk_shading(brdf, n_samples, normal, geo, wo, sun, sun_u, sun_v, bend):
+    """f(s, o, n) cos(i) (:meth:`raycast.renderer.brdf.BRDF.shade`) averaged over the solar disk.
+
+    Parameters
+    ----------
+    brdf : BRDF
+    n_samples : int, points of the disk quadrature (1, 7 or 24).
+    normal : (k, 3) float, unit shading normals.
+    geo : (k, 3) float, unit face normals turned toward the observer.
+    wo, sun : (k, 3) float, unit vectors toward the observer and the Sun's centre.
+    sun_u, sun_v : (k, 3) float, two unit vectors across each ``sun`` (the disk's axes).
+    bend : bool, evaluate specular lobes about the valid-reflection normal.
+
+    Returns
+    -------
+    (k,) float
+    """
+    centre = risen_suns(np.ascontiguousarray(geo, dtype=float), np.ascontiguousarray(sun, dtype=float))
+    cos_o = _dot(normal, wo)
+    spec_normal, spec_o = None, None
+    if bend and brdf.lobe_width_rad:
+        spec_normal = valid_reflection_normal(geo, wo, normal)
+        spec_o = _dot(spec_normal, wo)
+    offsets, weights = sun_disk_rule(n_samples)
+    total = np.zeros(len(normal))
+    for (du, dv), weight in zip(offsets, weights):
+        wi = centre
+        if du or dv:
+            wi = centre + SUN_RADIUS_RAD * (du * sun_u + dv * sun_v)
+            wi /= np.linalg.norm(wi, axis=1, keepdims=True)
+        spec_i = None if spec_normal is None else _dot(spec_normal, wi)
+        total += weight * brdf.shade(_dot(normal, wi), cos_o, _dot(wi, wo), spec_i, spec_o)
+    return total
