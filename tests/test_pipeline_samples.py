@@ -98,7 +98,7 @@ def test_pipeline_on_the_samples_writes_reports_and_fits_near_the_truth(tmp_path
             # and trades against the precession over a 2-minute pass (P_pr = 4000 s, a cone the
             # light curve barely constrains): it is not what the data pin, and is not compared.
             # 0.3%: above the 0.2% between the search's period and the true state's own mean
-            # light-curve rate (9.8108 vs 9.8299 s on the R-band pass), below the 0.4-0.5%
+            # light-curve rate (9.8108 vs 9.8299 s on the R-band pass), below the 0.4-0.6%
             # between that and the spin_period_s convention (9.87 s).
             apparent = record["apparent_period_s"]
             assert conventions["light_curve"]["median"] == pytest.approx(apparent, rel=3e-3), (
