@@ -103,36 +103,16 @@ def test_pipeline_on_the_samples_writes_reports_and_fits_near_the_truth(tmp_path
         conventions = fit["spin_periods"]["conventions"]
         assert set(conventions) == {"parameter", "orbit_frame", "inertial", "light_curve"}
         if record["norad"] == 22076:
-            # Like with like: the light curve's period, which the data pin, against the truth's
-            # light-curve period (the same convention computed from the true state over the
-            # pass). The fitted spin_period_s is relative to the precessing frame and trades
-            # against the precession over a 2-minute pass (P_pr = 4000 s): it is not compared.
-            # 0.3%: the period search on the noiseless curve differs from the truth's mean
-            # light-curve rate by up to 0.2% on these passes (truth.json: 9.8108 vs 9.8299 s).
-            truth = truth_light_curve_period_s(stored, record["truth"])
-            assert conventions["light_curve"]["median"] == pytest.approx(truth, rel=3e-3), (
+            # Like with like: the fit's light-curve (synodic) period against the period the
+            # project's period search finds on the noiseless rendered curve (truth.json's
+            # apparent_period_s). The fitted spin_period_s is relative to the precessing frame
+            # and trades against the precession over a 2-minute pass (P_pr = 4000 s, a cone the
+            # light curve barely constrains): it is not what the data pin, and is not compared.
+            # 0.3%: above the 0.2% between the search's period and the true state's own mean
+            # light-curve rate (9.8108 vs 9.8299 s on the R-band pass), below the 0.4-0.6%
+            # between that and the spin_period_s convention (9.87 s).
+            apparent = record["apparent_period_s"]
+            assert conventions["light_curve"]["median"] == pytest.approx(apparent, rel=3e-3), (
                 stored.source_name,
                 conventions,
             )
-
-
-def truth_light_curve_period_s(stored, truth: dict) -> float:
-    """The light-curve (synodic) period of the true spin state over the pass (rsodb.fit.conventions,
-    checked against closed forms in tests/test_fit_conventions.py)."""
-    import numpy as np
-
-    from rsodb.fit.conventions import STEPS_PER_CYCLE, rates_hz
-    from rsodb.fit.curves import geometry_at
-    from rsodb.fit.model import ConvexFacets, SpinStateModel
-
-    count = int(stored.duration_s / truth["spin_period_s"] * STEPS_PER_CYCLE) + 2
-    seconds = np.linspace(0.0, stored.duration_s, count)
-    times = stored.time_utc[0] + (seconds * 1e9).round().astype("int64").astype("timedelta64[ns]")
-    geometry = geometry_at(stored, times, 0.0, 1, None)
-    values = {k: v for k, v in truth.items() if k.endswith(("_s", "_deg")) and k != "panel_pitch_deg"}
-    # Phases at the pass's mid-time, as the samples were rendered and as fits refer them.
-    axis = {"spin_axis": truth["spin_axis"]}
-    model = SpinStateModel(
-        geometry, ConvexFacets.box(), "precessing", axis, (), stored.band, 1000.0, 0.5 * stored.duration_s
-    )
-    return 1.0 / rates_hz(model, values, geometry, truth["spin_axis"])["light_curve"]
