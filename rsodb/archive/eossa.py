@@ -211,7 +211,7 @@ def write_eossa(pass_: Pass, path, *, overwrite: bool = False) -> Path:
     """Write the EOSSA FITS file of a pass to `path` and return the path."""
     path = Path(path)
     if path.exists() and not overwrite:
-        raise FileExistsError(f"{path} exists; choose another --out or pass overwrite=True")
+        raise FileExistsError(f"{path} exists; choose another path, or pass overwrite=True (rsodb export --force)")
     eossa_hdus(pass_).writeto(path, overwrite=overwrite)
     return path
 

@@ -403,7 +403,7 @@ class PeriodResult:
         if not math.isfinite(self.best_period_s) or (not self.has_period and not force):
             raise ValueError(
                 f"pass {self.pass_id or self.label!r} has verdict {self.verdict!r} ({self.reason}); "
-                "give the spin-period prior yourself or pass force=True"
+                "give the spin-period prior yourself, or pass force=True (on the command line: rsodb fit --force)"
             )
         # Never narrower than +-3 sigma: a period measured over few cycles may be less precise
         # than the requested fraction.
