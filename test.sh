@@ -7,4 +7,4 @@ cd "$(dirname "$0")"
 bash setup.sh --no-run
 .venv/bin/ruff check .
 .venv/bin/ruff format --check .
-exec .venv/bin/python -m pytest -n 2 --timeout 900 "$@"
+exec .venv/bin/python -m pytest -n 2 --timeout 900 --durations 25 "$@"

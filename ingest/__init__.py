@@ -17,7 +17,8 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(
         "reduction": ["Reduction", "fit_reduction", "standard_mag"],
         "readers": ["READERS", "detect_format", "read_file", "read_pass"],
         "site": ["Site", "DERENIVKA", "UZHHOROD"],
-        "elements": ["parse_tle", "parse_omm"],
-        "writers": ["write_ccd_phot", "write_phc"],
+        "elements": ["parse_tle", "parse_omm", "ElementCatalogue", "DEFAULT_MAX_AGE_DAYS"],
+        "problems": ["RowProblem", "FileWarning"],
+        "writers": ["write_ccd_phot", "write_phc", "write_csv"],
     },
 )

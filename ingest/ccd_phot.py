@@ -35,23 +35,32 @@ from types import MappingProxyType
 import numpy as np
 
 from ingest import elements
-from ingest.observation import Pass
+from ingest.observation import MAX_EXPOSURE_S, Pass
+from ingest.problems import FileWarning, missing_data_warnings
 from ingest.reduction import fit_note, fit_reduction, sign_corrected_mag
 from ingest.site import DERENIVKA, Site
-from ingest.table import (
-    ELEVATION,
-    POSITIVE_RANGE,
-    Column,
-    Rows,
-    check_increasing,
-    check_parsed,
-    check_rows,
-    read_rows,
-)
+from ingest.table import ELEVATION, POSITIVE_RANGE, Column, RowFlags, Rows, read_rows
 from ingest.textfile import TextFile
-from ingest.times import NS_PER_DAY, NS_PER_S, date_days, julian_date_ns, time_of_day_ns, to_datetime64
+from ingest.times import (
+    FIRST_OBSERVATION_DATE,
+    LAST_STORABLE_DATE,
+    NS_PER_DAY,
+    NS_PER_S,
+    date_days,
+    julian_date_ns,
+    observable_days,
+    parse_datetime,
+    time_of_day_ns,
+    to_datetime64,
+)
 
-__all__ = ["CcdPhotReader", "stamp_offset_s", "MID_EXPOSURE_SINCE", "UT_COLUMNS", "JD_COLUMNS"]
+__all__ = [
+    "CcdPhotReader",
+    "stamp_offset_s",
+    "MID_EXPOSURE_SINCE",
+    "UT_COLUMNS",
+    "JD_COLUMNS",
+]
 
 # ccd_phot writes mid-exposure times since February 2023 (PROVENANCE.md); before, the
 # frame's start time.
@@ -199,11 +208,16 @@ class CcdPhotReader:
         band, band_source = _band(text, header)
         site, site_source = _site(text, header)
 
-        rows = read_rows(text, header.column_line + 1, columns)
-        stamps_ns = _stamps(text, rows, header.variant)
+        rows, problems = read_rows(text, header.column_line + 1, columns)
+        flags = RowFlags(text, rows, n_rows=len(rows) + len(problems), problems=problems)
+        stamps_ns = _stamps(rows, header.variant, flags)
+        _check_values(rows, columns, flags)
+        flags.time_order(stamps_ns, lambda i: _time_label(rows, i, header.variant))
+        keep, row_problems = flags.finish()
+        rows, stamps_ns = rows.select(keep), stamps_ns[keep]
+        _check_range_unit(text, rows)
         shift_s, stamps = stamp_offset_s(to_datetime64(stamps_ns[:1])[0], exposure_s, time_format[0])
         time_ns = stamps_ns + int(round(shift_s * NS_PER_S))
-        _check_values(text, rows, columns)
         flux = rows["flux"]
         mag = rows["mag"]
         saturated = _saturated(text, rows)
@@ -211,6 +225,7 @@ class CcdPhotReader:
         mag_corrected = None
         if reduction is not None and reduction.sign_error:
             mag_corrected = sign_corrected_mag(mag, rows["el_deg"], reduction)
+        warnings = _header_warnings(text, header, stamps_ns, exposure_s, band, band_source)
 
         info = {key: value for key, (value, _) in header.keys.items()}
         info.update(
@@ -263,6 +278,8 @@ class CcdPhotReader:
                 reduction=reduction,
                 mag_corrected=mag_corrected,
                 header=MappingProxyType(info),
+                row_problems=row_problems,
+                warnings=warnings,
             ),
         )
 
@@ -354,8 +371,8 @@ def _exposure(text: TextFile, header: _Header) -> float:
         exposure_s = float(value)
     except ValueError:
         exposure_s = float("nan")
-    if not (np.isfinite(exposure_s) and exposure_s > 0):
-        raise text.error(line, f"dt = {value!r} is not a positive exposure time in seconds")
+    if not (np.isfinite(exposure_s) and 0 < exposure_s <= MAX_EXPOSURE_S):
+        raise text.error(line, f"dt = {value!r} is not an exposure time in seconds (0 < dt <= {MAX_EXPOSURE_S:g})")
     return exposure_s
 
 
@@ -385,11 +402,9 @@ def _identity(text: TextFile, header: _Header) -> tuple[int, str, str]:
     if "NORAD" in header.keys:
         value, line = header.keys["NORAD"]
         try:
-            norad = int(value)
-        except ValueError:
-            raise text.error(line, f"NORAD = {value!r} is not a catalogue number") from None
-        if norad <= 0:
-            raise text.error(line, f"NORAD = {value!r} is not a catalogue number")
+            norad = elements.check_norad(value)
+        except ValueError as exc:
+            raise text.error(line, f"NORAD = {exc}") from None
     for source, element_norad, line in (
         ("TLE", elements.tle_norad(header.tle) if header.tle else None, header.tle_line),
         ("OMM", elements.omm_norad(header.omm) if header.omm else None, header.omm_line),
@@ -480,42 +495,64 @@ def _column(columns: tuple[Column, ...], key: str) -> Column:
     return next(c for c in columns if c.key == key)
 
 
-def _stamps(text: TextFile, rows: Rows, variant: str) -> np.ndarray:
-    """The rows' stamps as written, int64 ns since 1970 UTC, strictly increasing."""
+_DATE_RANGE = f"{FIRST_OBSERVATION_DATE} .. {LAST_STORABLE_DATE}"
+
+
+def _token(rows: Rows, key: str, i: int) -> str:
+    return rows[key][i].decode("utf-8", "replace")
+
+
+def _time_label(rows: Rows, i: int, variant: str) -> str:
+    return _token(rows, "jd", i) if variant == "jd" else f"{_token(rows, 'date', i)} {_token(rows, 'ut', i)}"
+
+
+def _stamps(rows: Rows, variant: str, flags: RowFlags) -> np.ndarray:
+    """The rows' stamps as written, int64 ns since 1970 UTC (0 for rows set aside)."""
     if variant == "jd":
         ns, ok = julian_date_ns(rows["jd"])
-        check_parsed(text, rows, ok, "jd", "JD", "is not a Julian date such as 2460746.2300939")
-        check_increasing(text, rows, ns, ("jd",))
+        flags.flag(
+            ~ok,
+            lambda i: f"JD {_token(rows, 'jd', i)!r} is not a Julian date of an observation ({_DATE_RANGE})",
+        )
         return ns
     days, ok_date = date_days(rows["date"])
-    check_parsed(text, rows, ok_date, "date", "Date", "is not a date (YYYY-MM-DD)")
+    flags.flag(~ok_date, lambda i: f"Date {_token(rows, 'date', i)!r} is not a date (YYYY-MM-DD)")
+    in_range = observable_days(days)
+    flags.flag(
+        ok_date & ~in_range,
+        lambda i: f"Date {_token(rows, 'date', i)} is outside the dates an observation can have ({_DATE_RANGE})",
+    )
     tod, ok_time = time_of_day_ns(rows["ut"])
-    check_parsed(text, rows, ok_time, "ut", "UT", "is not a time of day (HH:MM:SS.fff)")
-    ns = days * NS_PER_DAY + tod
-    check_increasing(text, rows, ns, ("date", "ut"))
-    return ns
+    flags.flag(~ok_time, lambda i: f"UT {_token(rows, 'ut', i)!r} is not a time of day (HH:MM:SS.fff)")
+    good = ok_date & in_range & ok_time
+    return np.where(good, np.where(good, days, 0) * NS_PER_DAY + tod, 0)
 
 
-def _check_values(text: TextFile, rows: Rows, columns: tuple[Column, ...]) -> None:
+# The magnitudes a satellite can have: brighter than -30 would outshine the Sun (-26.7).
+_MAG_RANGE = (-30.0, 40.0)
+
+
+def _check_values(rows: Rows, columns: tuple[Column, ...], flags: RowFlags) -> None:
     """Physical bounds: positive flux and range, elevation within +-90, non-negative errors."""
-    check_rows(
-        text,
-        rows,
+    flags.values(
         columns,
         (
             (
                 "flux",
                 lambda v: v > 0,
-                "is not positive: ccd_phot never writes such a row because its magnitude "
-                "would be undefined; remove the row or fix the value",
+                "is not positive: ccd_phot never writes such a row because its magnitude would be undefined",
             ),
             ("flux_err", lambda v: v >= 0, "is negative; an error must be zero or positive"),
+            ("mag", lambda v: (v > _MAG_RANGE[0]) & (v < _MAG_RANGE[1]), "is not a magnitude of a satellite"),
             ("mag_err", lambda v: v >= 0, "is negative; an error must be zero or positive"),
             ELEVATION,
             ("az_deg", lambda v: (v >= -360) & (v <= 360), "is not an azimuth in degrees"),
             POSITIVE_RANGE,
         ),
     )
+
+
+def _check_range_unit(text: TextFile, rows: Rows) -> None:
     median_km = float(np.median(rows["range_km"]))
     if median_km < _MIN_RANGE_KM:
         raise text.error(
@@ -523,6 +560,38 @@ def _check_values(text: TextFile, rows: Rows, columns: tuple[Column, ...]) -> No
             f"the range column's median is {median_km:g}, so it is not in km as "
             "ccd_phot writes it (even under the label Rg(Mm)); convert it to km",
         )
+
+
+def _header_warnings(
+    text: TextFile, header: _Header, stamps_ns: np.ndarray, exposure_s: float, band: str, band_source: str
+) -> tuple[FileWarning, ...]:
+    """Where the header disagrees with the data: frame times, or the band's three sources."""
+    found = []
+    if header.times:
+        first_text, first_line = header.times[0]
+        last_text, last_line = header.times[-1]
+        found += missing_data_warnings(
+            (parse_datetime(first_text), first_line, "first frame time"),
+            (parse_datetime(last_text), last_line, "last frame time"),
+            stamps_ns,
+            exposure_s,
+        )
+    if band_source == "Filter line":
+        line = header.keys["Filter"][1]
+        suffix = re.fullmatch(_LABEL_PATTERNS["mag"], header.labels[len(header.labels) - 6]).group(1)
+        extension = _EXTENSION_BAND.search(text.name)
+        for where, other in (
+            ("the magnitude column is mag" + (suffix or ""), suffix),
+            (f"the file name ends in .ph{extension.group(1) if extension else ''}", extension and extension.group(1)),
+        ):
+            if other and other.upper() != band.upper():
+                found.append(
+                    FileWarning(
+                        line,
+                        f"Filter = {band} but {where}: the band is taken from the Filter line; fix whichever is wrong",
+                    )
+                )
+    return tuple(found)
 
 
 def _saturated(text: TextFile, rows: Rows) -> np.ndarray:

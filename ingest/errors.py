@@ -2,9 +2,21 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
-__all__ = ["FormatError"]
+__all__ = ["FormatError", "printable_path"]
+
+
+def printable_path(path) -> str:
+    """A path as text that can be printed and stored: bytes that are not UTF-8 (which Python
+    keeps as lone surrogates in str paths) are shown as ``\\xNN`` escapes.
+
+    >>> printable_path(b"night/\\xff.phV".decode("utf-8", "surrogateescape"))
+    'night/\\\\xff.phV'
+    """
+    raw = os.fsencode(path) if isinstance(path, (str, bytes, os.PathLike)) else str(path).encode()
+    return raw.decode("utf-8", "backslashreplace")
 
 
 class FormatError(ValueError):
@@ -24,7 +36,7 @@ class FormatError(ValueError):
     """
 
     def __init__(self, path: str | Path, line: int | None, reason: str):
-        self.path = str(path)
+        self.path = printable_path(path)
         self.line = line
         self.reason = reason
         where = f"{self.path}:{line}" if line is not None else self.path

@@ -12,10 +12,15 @@ from types import MappingProxyType
 
 import numpy as np
 
+from ingest.elements import MAX_NORAD
+from ingest.problems import FileWarning, RowProblem
 from ingest.reduction import Reduction
 from ingest.site import Site
 
-__all__ = ["Pass", "ARRAY_FIELDS"]
+__all__ = ["Pass", "ARRAY_FIELDS", "MAX_EXPOSURE_S"]
+
+# The longest exposure a light-curve sample can have: one hour.
+MAX_EXPOSURE_S = 3600.0
 
 # Per-sample arrays of a pass, in storage order, with their dtypes.
 ARRAY_FIELDS = {
@@ -84,6 +89,15 @@ class Pass:
         Magnitudes with the extinction sign error undone; None when the file had no error.
     header : mapping
         Every header key and value as read, for provenance.
+    row_problems : tuple of RowProblem
+        Rows of the file that the reader set aside (with line, reason and the row as written);
+        their values are not in the arrays above.
+    warnings : tuple of FileWarning
+        Where the file's header disagrees with its data (an end time long after the last row, a
+        filter letter that contradicts the magnitude column, ...).
+    elements_source : mapping or None
+        Where `tle` / `omm` came from when not from the file's own header: catalogue file,
+        its SHA-256, the set's epoch and its age at the pass (see `ingest.elements`).
     """
 
     norad: int
@@ -113,8 +127,20 @@ class Pass:
     reduction: Reduction | None = None
     mag_corrected: np.ndarray | None = None
     header: Mapping = field(default_factory=dict)
+    row_problems: tuple[RowProblem, ...] = ()
+    warnings: tuple[FileWarning, ...] = ()
+    elements_source: Mapping | None = None
 
     def __post_init__(self):
+        if isinstance(self.norad, bool) or not isinstance(self.norad, (int, np.integer)):
+            raise TypeError(f"pass {self.source_name!r}: norad={self.norad!r} must be an integer catalogue number")
+        if not 0 < int(self.norad) <= MAX_NORAD:
+            raise ValueError(
+                f"pass {self.source_name!r}: norad={self.norad} is not a catalogue number (1..{MAX_NORAD})"
+            )
+        object.__setattr__(self, "norad", int(self.norad))
+        object.__setattr__(self, "row_problems", tuple(self.row_problems))
+        object.__setattr__(self, "warnings", tuple(self.warnings))
         n = None
         for name, dtype in ARRAY_FIELDS.items():
             value = np.asarray(getattr(self, name), dtype=dtype)
@@ -136,8 +162,10 @@ class Pass:
             object.__setattr__(self, "mag_corrected", corrected)
         if n == 0:
             raise ValueError(f"pass {self.source_name!r} has no samples")
-        if not (np.isfinite(self.exposure_s) and self.exposure_s > 0):
-            raise ValueError(f"pass {self.source_name!r}: exposure_s={self.exposure_s!r} must be positive")
+        if not (np.isfinite(self.exposure_s) and 0 < self.exposure_s <= MAX_EXPOSURE_S):
+            raise ValueError(
+                f"pass {self.source_name!r}: exposure_s={self.exposure_s!r} must be positive and at most {MAX_EXPOSURE_S:g} s"
+            )
         if np.any(np.diff(self.time_utc.view("int64")) <= 0):
             raise ValueError(f"pass {self.source_name!r}: time_utc must be strictly increasing")
 
@@ -145,13 +173,13 @@ class Pass:
     # send to another process; they travel as plain dicts and are frozen again on arrival.
     def __getstate__(self):
         state = dict(self.__dict__)
-        for name in ("header", "omm"):
+        for name in ("header", "omm", "elements_source"):
             if isinstance(state.get(name), MappingProxyType):
                 state[name] = dict(state[name])
         return state
 
     def __setstate__(self, state):
-        for name in ("header", "omm"):
+        for name in ("header", "omm", "elements_source"):
             if isinstance(state.get(name), dict):
                 state[name] = MappingProxyType(state[name])
         self.__dict__.update(state)

@@ -22,7 +22,8 @@ Decisions, with the evidence for each (docs/formats.md has the long form):
   sample; the real file agrees (line 2 is one dt after the last possible stamp). The reader
   adds ``dt/2`` to reach mid-exposure and records ``time_shift_s``.
 * Only the time of day is written: the date comes from line 1 and a backward step of more
-  than 12 h is a midnight rollover; a smaller backward step is an error.
+  than 23 h (the next row less than an hour later once a day is added) is a midnight rollover;
+  any other backward step is a clock glitch and its row is set aside.
 * ``Imp-fon`` is the background-subtracted count per sample (the flux); ``Fon`` the sky
   count subtracted from it. With Poisson statistics for the raw count ``Imp + Fon`` and for a
   sky measured over one sample, ``flux_err = sqrt(Imp + 2 Fon)`` and
@@ -44,21 +45,22 @@ from types import MappingProxyType
 import numpy as np
 
 from ingest import elements
-from ingest.observation import Pass
+from ingest.observation import MAX_EXPOSURE_S, Pass
+from ingest.problems import missing_data_warnings
 from ingest.reduction import fit_note, fit_reduction, sign_corrected_mag
 from ingest.site import UZHHOROD
-from ingest.table import (
-    ELEVATION,
-    POSITIVE_RANGE,
-    Column,
-    Rows,
-    check_increasing,
-    check_parsed,
-    check_rows,
-    read_rows,
-)
+from ingest.table import ELEVATION, POSITIVE_RANGE, Column, RowFlags, Rows, read_rows
 from ingest.textfile import TextFile
-from ingest.times import NS_PER_DAY, NS_PER_S, time_of_day_ns, to_datetime64
+from ingest.times import (
+    FIRST_OBSERVATION_DATE,
+    LAST_STORABLE_DATE,
+    NS_PER_DAY,
+    NS_PER_S,
+    observable_days,
+    parse_datetime,
+    time_of_day_ns,
+    to_datetime64,
+)
 
 __all__ = ["PhcReader", "PHC_COLUMNS", "SENTINEL_MAGS", "poisson_flux_err"]
 
@@ -81,6 +83,9 @@ _COLUMN_LINE = re.compile(
 _FIRST_LINE = re.compile(r"^(\d{4}-\d{2}-\d{2}) (\d{2}:\d{2}:\d{2}(\.\d+)?)$")
 _KEYS = {"dt": "dt", "COSPAR ID": "cospar", "NORAD ID": "norad", "NAME": "name"}
 _HALF_DAY_NS = NS_PER_DAY // 2
+# A pass lasts minutes: a backward step is a midnight rollover only when the next row comes less
+# than this long after the previous one once a day is added.
+_ROLLOVER_NS = NS_PER_DAY - 3600 * NS_PER_S
 _MAX_HEADER_LINES = 40
 
 
@@ -131,11 +136,29 @@ class PhcReader:
         keys, tle, column_line, notes = _header(text)
         exposure_s = _positive_float(text, keys, "dt", "dt=1.0")
         norad = _norad(text, keys, tle)
-        rows = read_rows(text, column_line + 1, PHC_COLUMNS)
-        stamps_ns = _stamps(text, rows, midnight_ns, start_tod_ns)
+        rows, problems = read_rows(text, column_line + 1, PHC_COLUMNS)
+        flags = RowFlags(text, rows, n_rows=len(rows) + len(problems), problems=problems)
+        stamps_ns = _stamps(rows, midnight_ns, start_tod_ns, flags)
+        _check_geometry(rows, flags)
+        flags.time_order(stamps_ns, lambda i: rows["ut"][i].decode("utf-8", "replace"))
+        keep, row_problems = flags.finish()
+        rows, stamps_ns = rows.select(keep), stamps_ns[keep]
         shift_s = exposure_s / 2.0
         time_utc = to_datetime64(stamps_ns + int(round(shift_s * NS_PER_S)))
-        _check_geometry(text, rows)
+        # Line 2 is the end of the last sample: the last stamp the group could hold is one dt earlier.
+        end_time = parse_datetime(text.line(2))
+        warnings = tuple(
+            missing_data_warnings(
+                (np.datetime64(midnight_ns + start_tod_ns, "ns"), 1, "first sample time"),
+                (
+                    None if end_time is None else end_time - np.timedelta64(int(round(exposure_s * NS_PER_S)), "ns"),
+                    2,
+                    "last sample time (line 2 less dt)",
+                ),
+                stamps_ns,
+                exposure_s,
+            )
+        )
 
         info = {key: value for key, (value, _) in keys.items()}
         info.update(
@@ -208,6 +231,8 @@ class PhcReader:
                     reduction=reduction,
                     mag_corrected=mag_corrected,
                     header=MappingProxyType(band_info),
+                    row_problems=row_problems,
+                    warnings=warnings,
                 )
             )
         return tuple(passes)
@@ -220,9 +245,16 @@ def _first_line(text: TextFile) -> tuple[int, int, str]:
     if match is None:
         raise text.error(1, f"line 1 should be the start date and time (YYYY-MM-DD HH:MM:SS), found {line[:40]!r}")
     try:
-        midnight = np.datetime64(match.group(1), "D").astype("datetime64[ns]").astype(np.int64)
+        day = np.datetime64(match.group(1), "D").astype(np.int64)
     except ValueError:
         raise text.error(1, f"{match.group(1)!r} is not a calendar date") from None
+    if not observable_days(day):
+        raise text.error(
+            1,
+            f"the date {match.group(1)} is outside the dates an observation can have "
+            f"({FIRST_OBSERVATION_DATE} .. {LAST_STORABLE_DATE}); fix line 1",
+        )
+    midnight = day * NS_PER_DAY
     clock_ns, _ = time_of_day_ns(np.array([match.group(2).encode()]))
     return int(midnight), int(clock_ns[0]), line
 
@@ -271,8 +303,8 @@ def _positive_float(text: TextFile, keys: dict, key: str, example: str) -> float
         number = float(value)
     except ValueError:
         number = float("nan")
-    if not (np.isfinite(number) and number > 0):
-        raise text.error(line, f"{key}={value!r} is not a positive number of seconds")
+    if not (np.isfinite(number) and 0 < number <= MAX_EXPOSURE_S):
+        raise text.error(line, f"{key}={value!r} is not a number of seconds (0 < {key} <= {MAX_EXPOSURE_S:g})")
     return number
 
 
@@ -281,9 +313,9 @@ def _norad(text: TextFile, keys: dict, tle) -> int:
     if "NORAD ID" in keys:
         value, line = keys["NORAD ID"]
         try:
-            norad = int(value)
-        except ValueError:
-            raise text.error(line, f"NORAD ID={value!r} is not a catalogue number") from None
+            norad = elements.check_norad(value)
+        except ValueError as exc:
+            raise text.error(line, f"NORAD ID={exc}") from None
     if tle is not None:
         from_tle = elements.tle_norad(tle)
         if norad is None:
@@ -297,27 +329,29 @@ def _norad(text: TextFile, keys: dict, tle) -> int:
     return norad
 
 
-def _stamps(text: TextFile, rows: Rows, midnight_ns: int, start_tod_ns: int) -> np.ndarray:
-    """Times of day + the date of line 1, rolling over midnight; ns since 1970 UTC.
+def _stamps(rows: Rows, midnight_ns: int, start_tod_ns: int, flags: RowFlags) -> np.ndarray:
+    """Times of day + the date of line 1, rolling over midnight; ns since 1970 UTC (0 for rows set aside).
 
     The first row is on line 1's date unless it is more than 12 h earlier in the day than line 1's
     time (the rows before midnight were removed): then it is on the next day.
     """
     tod, ok = time_of_day_ns(rows["ut"])
-    check_parsed(text, rows, ok, "ut", "UT", "is not a time of day (HH:MM:SS.ffffff)")
-    rollover = np.diff(tod) < -_HALF_DAY_NS
-    first_day = 1 if tod[0] - start_tod_ns < -_HALF_DAY_NS else 0
-    day = first_day + np.concatenate([[0], np.cumsum(rollover)])
-    stamps_ns = midnight_ns + day * NS_PER_DAY + tod
-    check_increasing(text, rows, stamps_ns, ("ut",))
-    return stamps_ns
+    flags.flag(
+        ~ok, lambda i: f"UT TIME {rows['ut'][i].decode('utf-8', 'replace')!r} is not a time of day (HH:MM:SS.ffffff)"
+    )
+    good = np.flatnonzero(ok)
+    day = np.zeros(len(tod), dtype=np.int64)
+    if len(good):
+        parsed = tod[good]
+        rollover = np.diff(parsed) < -_ROLLOVER_NS
+        first_day = 1 if parsed[0] - start_tod_ns < -_HALF_DAY_NS else 0
+        day[good] = first_day + np.concatenate([[0], np.cumsum(rollover)])
+    return np.where(ok, midnight_ns + day * NS_PER_DAY + tod, 0)
 
 
-def _check_geometry(text: TextFile, rows: Rows) -> None:
+def _check_geometry(rows: Rows, flags: RowFlags) -> None:
     negative_sky = "is negative; a sky count cannot be"
-    check_rows(
-        text,
-        rows,
+    flags.values(
         PHC_COLUMNS,
         (
             ELEVATION,

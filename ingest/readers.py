@@ -10,6 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ingest.ccd_phot import CcdPhotReader
+from ingest.csv_table import CsvReader
 from ingest.observation import Pass
 from ingest.phc import PhcReader
 from ingest.textfile import TextFile
@@ -20,6 +21,7 @@ __all__ = ["READERS", "detect_format", "read_file", "read_pass"]
 READERS = {
     "ccd_phot": CcdPhotReader(),
     "phc": PhcReader(),
+    "csv": CsvReader(),
 }
 
 
@@ -39,7 +41,8 @@ def detect_format(text: TextFile) -> str:
         1,
         f"unknown file format (line 1 reads {first!r}); expected a ccd_phot light curve "
         "('# TLE:' header and a '# Date UT ...' or '# JD ...' column line) or a photometer "
-        ".phc file (a date and time on line 1 and a 'UT TIME ImpB-fon ...' column line)",
+        ".phc file (a date and time on line 1 and a 'UT TIME ImpB-fon ...' column line) or a CSV light curve "
+        "('# key = value' lines, then a column line such as 'time_utc,mag,mag_err')",
     )
 
 

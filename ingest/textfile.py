@@ -10,16 +10,18 @@ byte buffer, so a clean 400 kB file costs well under a millisecond.
 from __future__ import annotations
 
 from dataclasses import dataclass
+import fcntl
 from functools import cached_property
 import hashlib
 import os
 from pathlib import Path
+import stat
 
 import numpy as np
 
-from ingest.errors import FormatError
+from ingest.errors import FormatError, printable_path
 
-__all__ = ["TextFile", "MAX_FILE_BYTES", "MAX_LINE_BYTES", "HEAD_BYTES"]
+__all__ = ["TextFile", "open_regular_file", "MAX_FILE_BYTES", "MAX_LINE_BYTES", "HEAD_BYTES"]
 
 # The largest real file is ~0.4 MB (2500 rows); 64 MB is ~400k rows, far beyond any pass.
 MAX_FILE_BYTES = 64 * 2**20
@@ -70,10 +72,11 @@ class TextFile:
         """Read `path` with the bounds above; raise `FormatError` for anything not line-oriented text.
 
         OS errors (missing file, permission, a directory) propagate unchanged: they are not
-        problems of the file's format.
+        problems of the file's format. A FIFO, socket or device is refused without reading it
+        (reading a FIFO would wait for a writer forever).
         """
-        path = str(path)
-        with open(path, "rb") as stream:
+        path = os.fspath(path)
+        with open_regular_file(path) as stream:
             size = os.fstat(stream.fileno()).st_size
             if size == 0:
                 raise FormatError(path, None, "the file is empty; an observation file needs a header and data rows")
@@ -93,6 +96,7 @@ class TextFile:
     @classmethod
     def from_bytes(cls, path: str, data: bytes) -> TextFile:
         """Check `data` (the whole file) and build its line table; `path` is only for messages."""
+        path = printable_path(path)
         raw_sha256 = hashlib.sha256(data).hexdigest()
         if data.isspace():
             raise FormatError(
@@ -197,6 +201,43 @@ class TextFile:
     def error(self, line: int | None, reason: str) -> FormatError:
         """A `FormatError` for this file."""
         return FormatError(self.path, line, reason)
+
+
+def open_regular_file(path):
+    """Open `path` for reading bytes, refusing anything but a regular file before any read.
+
+    The file is opened without blocking (so a FIFO with no writer does not hang the open) and
+    checked with ``fstat`` on the open descriptor (so nothing can swap the file in between).
+
+    Raises
+    ------
+    FormatError
+        For a FIFO, socket, character or block device.
+    OSError
+        Missing file, permission, a directory.
+    """
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+    try:
+        mode = os.fstat(fd).st_mode
+        if stat.S_ISDIR(mode):
+            raise IsADirectoryError(21, "Is a directory", path)
+        if not stat.S_ISREG(mode):
+            kind = (
+                "a FIFO (named pipe)"
+                if stat.S_ISFIFO(mode)
+                else "a socket"
+                if stat.S_ISSOCK(mode)
+                else "a device"
+                if stat.S_ISCHR(mode) or stat.S_ISBLK(mode)
+                else "not a regular file"
+            )
+            raise FormatError(path, None, f"is {kind}, not an observation file; give a regular file")
+        flags = fcntl.fcntl(fd, fcntl.F_GETFL)
+        fcntl.fcntl(fd, fcntl.F_SETFL, flags & ~os.O_NONBLOCK)
+        return os.fdopen(fd, "rb")
+    except BaseException:
+        os.close(fd)
+        raise
 
 
 def _check_head(path: str, head: bytes) -> None:

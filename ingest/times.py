@@ -19,6 +19,10 @@ import numpy as np
 __all__ = [
     "NS_PER_DAY",
     "NS_PER_S",
+    "FIRST_OBSERVATION_DATE",
+    "LAST_STORABLE_DATE",
+    "observable_days",
+    "parse_datetime",
     "UNIX_EPOCH_JD",
     "time_of_day_ns",
     "date_days",
@@ -34,8 +38,13 @@ NS_PER_DAY = 86_400 * NS_PER_S
 # 1970-01-01T00:00 UTC is JD 2440587.5.
 UNIX_EPOCH_JD = 2440587.5
 _UNIX_EPOCH_JD_DAY = 2440587  # the JD day (starting at noon) that contains the Unix epoch
-# Julian dates this project can meet: 1858-11-17 .. 2132-08-31.
-_JD_RANGE = (2_400_000, 2_500_000)
+# The dates an observation can have: none before Sputnik's launch, and none after the last day
+# numpy's datetime64[ns] (int64 ns since 1970) can hold, where times would wrap around.
+FIRST_OBSERVATION_DATE = np.datetime64("1957-10-04", "D")
+LAST_STORABLE_DATE = np.datetime64("2262-04-10", "D")
+_DAY_RANGE = (int(FIRST_OBSERVATION_DATE.astype(np.int64)), int(LAST_STORABLE_DATE.astype(np.int64)))
+# The same range as Julian day numbers (the JD day starting at noon of the date before).
+_JD_RANGE = (_UNIX_EPOCH_JD_DAY + _DAY_RANGE[0], _UNIX_EPOCH_JD_DAY + _DAY_RANGE[1])
 _DATE_RE = re.compile(rb"^\d{4}-\d{2}-\d{2}$")
 _JD_INT_DIGITS = 8
 _JD_FRAC_DIGITS = 18
@@ -105,6 +114,33 @@ def time_of_day_ns(column: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.where(ok, ns, 0), ok
 
 
+def observable_days(days: np.ndarray) -> np.ndarray:
+    """(n,) bool: days since 1970 that lie within FIRST_OBSERVATION_DATE .. LAST_STORABLE_DATE.
+
+    >>> observable_days(np.array([-5000, 20000, 375864])).tolist()
+    [False, True, False]
+    """
+    days = np.asarray(days)
+    return (days >= _DAY_RANGE[0]) & (days <= _DAY_RANGE[1])
+
+
+def parse_datetime(text: str) -> np.datetime64 | None:
+    """``YYYY-MM-DD[ T]HH:MM:SS[.f...]`` as datetime64[ns], or None when it is not such a time
+    or lies outside the observable dates (a year 2999 would wrap around in datetime64[ns]).
+
+    >>> parse_datetime("2025-01-30 17:31:25"), parse_datetime("2999-01-30 00:00:00")
+    (numpy.datetime64('2025-01-30T17:31:25.000000000'), None)
+    """
+    text = text.strip().rstrip("Z").replace(" ", "T", 1)
+    try:
+        day = np.datetime64(text[:10], "D")
+        if not observable_days(day.astype(np.int64)):
+            return None
+        return np.datetime64(text, "ns")
+    except ValueError:
+        return None
+
+
 def date_days(column: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Parse ``YYYY-MM-DD`` dates into days since 1970-01-01.
 
@@ -145,11 +181,12 @@ def julian_date_ns(column: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     -------
     ns : (n,) int64
     ok : (n,) bool
-        True for plain decimals with one point whose day lies in 1858..2132.
+        True for plain decimals with one point whose day lies in the observable dates
+        (FIRST_OBSERVATION_DATE .. LAST_STORABLE_DATE).
 
-    >>> ns, ok = julian_date_ns(np.array([b"2440587.5", b"2460746.230093974", b"24607a6.2"]))
+    >>> ns, ok = julian_date_ns(np.array([b"2440587.5", b"2460746.230093974", b"24607a6.2", b"2400000.5"]))
     >>> ns[:2].tolist(), ok.tolist()
-    ([0, 1741714280119353600], [True, True, False])
+    ([0, 1741714280119353600], [True, True, False, False])
     """
     column = np.ascontiguousarray(column)
     chars = column.view(np.uint8).reshape(len(column), column.dtype.itemsize)
@@ -170,7 +207,8 @@ def julian_date_ns(column: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     ok &= fraction[:, 0] != 0  # a digit after the point
     day = np.where(whole == 0, 0, whole.astype(np.int64) - 48) @ _INT_PLACES
     numerator = np.where(fraction == 0, 0, fraction.astype(np.int64) - 48) @ _FRAC_PLACES
-    ok &= (day >= _JD_RANGE[0]) & (day < _JD_RANGE[1])
+    ok &= (day >= _JD_RANGE[0]) & (day <= _JD_RANGE[1])
+    day = np.where(ok, day, _UNIX_EPOCH_JD_DAY)  # no overflow below for rows refused here
     # The JD day starts at noon: JD d.f is (d - 2440587) days + (f - 0.5) day after the epoch.
     day_ns = (numerator / 10.0**_JD_FRAC_DIGITS) * NS_PER_DAY
     ns = (day - _UNIX_EPOCH_JD_DAY) * NS_PER_DAY - NS_PER_DAY // 2 + np.rint(day_ns).astype(np.int64)

@@ -17,11 +17,12 @@ from pathlib import Path
 import numpy as np
 
 from ingest.ccd_phot import stamp_offset_s
+from ingest.csv_table import CSV_MARKER
 from ingest.observation import Pass
 from ingest.phc import SENTINEL_MAGS
 from ingest.times import NS_PER_S, format_date_time_ms, format_iso_us, julian_date_repr, to_datetime64
 
-__all__ = ["write_ccd_phot", "write_phc", "CCD_PHOT_VARIANTS"]
+__all__ = ["write_ccd_phot", "write_phc", "write_csv", "CCD_PHOT_VARIANTS", "CSV_PRECISION"]
 
 CCD_PHOT_VARIANTS = ("ut", "jd")
 
@@ -222,6 +223,95 @@ def write_phc(
     )
     _write_atomically(path, "\n".join(lines) + "\n" + "\n".join(rows) + "\n")
     return Path(path)
+
+
+# Decimals of each CSV column: one more than the lab's files print (magnitudes 0.001, angles and
+# ranges 0.001), so no printed digit is lost and no false precision (16 digits) is added.
+CSV_PRECISION = {
+    "mag_file": 4,
+    "mag_corrected": 4,
+    "mag_err": 4,
+    "flux": 4,
+    "flux_err": 4,
+    "az_deg": 4,
+    "el_deg": 4,
+    "range_km": 3,
+}
+
+
+def write_csv(pass_: Pass, out, notes: dict | None = None) -> None:
+    """Write one pass as a CSV light curve that `ingest.read_file` reads back.
+
+    Columns: ``time_utc`` (ISO 8601 UTC at mid-exposure, to the nanosecond), ``mag_file`` (the
+    magnitude as the source file wrote it), ``mag_corrected`` (only for passes whose file had
+    the extinction sign error: the magnitude to use), ``mag_err``, ``flux``, ``flux_err``,
+    ``az_deg``, ``el_deg``, ``range_km``, ``saturated`` and ``valid`` (0/1), with the decimals of
+    `CSV_PRECISION`. A ``# key = value`` header gives the object, band, exposure, site, time
+    convention, magnitude convention, reduction and elements.
+
+    Parameters
+    ----------
+    pass_ : Pass
+    out : str, Path or text stream
+        A file (written to a temporary name, then renamed) or an open stream such as stdout.
+    notes : dict, optional
+        More ``# key = value`` lines (e.g. the pass id).
+    """
+    site = pass_.site
+    header = {
+        "object": pass_.norad,
+        "name": pass_.name,
+        "cospar": pass_.cospar,
+        "band": pass_.band,
+        "exposure_s": repr(float(pass_.exposure_s)),
+        "site": site.name,
+        "site_lat_deg": repr(site.lat_deg),
+        "site_lon_deg": repr(site.lon_deg),
+        "site_elevation_m": repr(site.elevation_m),
+        "time_stamps": "mid",
+        "mag_convention": pass_.mag_convention,
+    }
+    if pass_.mag_corrected is not None:
+        header["mag_corrected"] = "mag_file with the extinction sign error undone: the magnitude to use"
+    if pass_.reduction is not None:
+        header["reduction"] = json.dumps(
+            {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in vars(pass_.reduction).items()}
+        )
+    if pass_.tle is not None:
+        header.update({f"tle_{line[0]}": line for line in pass_.tle})
+    if pass_.omm is not None:
+        header["omm"] = json.dumps(dict(pass_.omm))
+    if pass_.elements_source:
+        header["elements_source"] = json.dumps(dict(pass_.elements_source))
+    header["source"] = f"{pass_.source_name} ({pass_.source_format}, sha256 {pass_.source_sha256})"
+    header.update(notes or {})
+    lines = [CSV_MARKER + ": one row per sample; times UTC at mid-exposure"]
+    lines += [f"# {key} = {' '.join(str(value).splitlines())}" for key, value in header.items() if value != ""]
+
+    columns = {"mag_file": pass_.mag}
+    if pass_.mag_corrected is not None:
+        columns["mag_corrected"] = pass_.mag_corrected
+    columns.update(
+        mag_err=pass_.mag_err,
+        flux=pass_.flux,
+        flux_err=pass_.flux_err,
+        az_deg=pass_.az_deg,
+        el_deg=pass_.el_deg,
+        range_km=pass_.range_km,
+    )
+    lines.append(",".join(["time_utc", *columns, "saturated", "valid"]))
+    times = [stamp + "Z" for stamp in np.datetime_as_string(pass_.time_utc, unit="ns").tolist()]
+    formatted = [
+        [f"{value:.{CSV_PRECISION[name]}f}" if np.isfinite(value) else "nan" for value in values.tolist()]
+        for name, values in columns.items()
+    ]
+    flags = [pass_.saturated.astype(int).astype(str).tolist(), pass_.valid.astype(int).astype(str).tolist()]
+    rows = map(",".join, zip(times, *formatted, *flags))
+    content = "\n".join(lines) + "\n" + "\n".join(rows) + "\n"
+    if hasattr(out, "write"):
+        out.write(content)
+    else:
+        _write_atomically(out, content)
 
 
 # -- helpers -----------------------------------------------------------------------------------

@@ -22,18 +22,18 @@ from rsodb.report.period_report import build_period_report
 
 __all__ = ["run_pipeline", "quick_fit_configs", "QUICK_FIT", "QUICK_SPIN_AXES"]
 
-# A first look that keeps the bundled samples within a few minutes on two cores: at most 50
-# samples per pass, no exposure sub-samples, a global search on 40 samples whose final
+# A first look that keeps the bundled samples within a few minutes on two cores. The likelihood
+# sees at most 120 samples per pass, chosen without a stride (bins of consecutive samples where
+# they turn the body little, then contiguous windows each a cycle long spread over the pass;
+# rsodb.fit.selection), with no exposure sub-samples; a global search on 40 samples whose final
 # population seeds the walkers (spread over the good modes), differential-evolution moves that
-# let walkers jump between modes, and a short chain: ~3500 evaluations of the forward model per
-# pass, each costing the shape's cached renderer (~0.1-0.3 ms per direction pair on this
-# machine) times the samples. On the bundled samples it lands near the TOPEX truths; COSMOS
-# 2502's glint-dominated curves sometimes need the full fit (30 generations and 80 steps found
-# every truth but took twice as long).
+# let walkers jump between modes, and a short chain. Residuals, their RMS and the model curve
+# still cover every sample of the pass. The quick fit says when its chain has not converged.
 QUICK_FIT = {
     "name": "quick",
+    "band_draws": 20,
     "model": {"n_sub": 1},
-    "data": {"max_points": 50},
+    "data": {"max_points": 120},
     "sampler": {
         "n_walkers": 12,
         "n_steps": 60,
@@ -106,14 +106,17 @@ def run_pipeline(
     )
     summary["periods"] = {r.pass_id: {"period_s": r.best_period_s, "verdict": r.verdict} for r in survey.results}
 
-    rows = archive.catalog()
+    missing = {pass_id: ("periods", error) for pass_id, error in survey.failures}  # shown in the index
+
+    rows = archive.summaries()
     norads = sorted({row.norad for row in rows})
     if fit and rows:
         outcomes = _fit_all(archive, rows, fit_config, fit_name, workers, progress)
         for outcome in outcomes:
             log(outcome.summary())
             for pass_id, error in outcome.failed:
-                log(f"  {pass_id}: fit failed: {error}")
+                log(f"  {pass_id}: not fitted: {error}")
+                missing[pass_id] = ("fits", error)
         fit_name = outcomes[0].name
         summary["fits"] = [outcome.to_dict() for outcome in outcomes]
 
@@ -135,7 +138,7 @@ def run_pipeline(
                 )
             except ValueError as error:
                 log(f"object {norad}: no fit report ({error})")
-    index = build_index(archive, written, fit_name if fit and rows else None).write(out_dir / "index.html")
+    index = build_index(archive, written, fit_name if fit and rows else None, missing).write(out_dir / "index.html")
     summary["reports"] = [str(path) for _, _, path in written]
     summary["index"] = str(index)
     summary["elapsed_s"] = time.perf_counter() - started

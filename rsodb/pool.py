@@ -13,8 +13,6 @@ from contextlib import contextmanager
 import multiprocessing
 import os
 
-from tqdm.auto import tqdm
-
 __all__ = ["imap_in_pool", "default_processes", "SINGLE_THREAD_ENV"]
 
 SINGLE_THREAD_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
@@ -81,6 +79,10 @@ def imap_in_pool(
     processes = default_processes() if processes is None else int(processes)
     if processes < 1:
         raise ValueError(f"processes={processes!r} must be at least 1")
+    # tqdm.auto loads asyncio; the archive's commands import this module for default_processes
+    # alone and should not load it at start-up (bench/archive_scale.py times their start-up).
+    from tqdm.auto import tqdm
+
     bar = tqdm(total=len(items), desc=description or None, disable=not progress, unit="item")
     try:
         if processes == 1 or len(items) <= 1:

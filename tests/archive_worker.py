@@ -4,8 +4,8 @@
                                           [--start-after FILE] [--commit-pause S]
         Ingest PATHs (once FILE exists, if given; each object commit followed by a pause of S
         seconds, if given, so that two ingests surely overlap). Prints ``START`` once ready,
-        ``BEGIN <norad>`` before each object commit and one JSON line per commit after its
-        rename (``{"commit": norad, "files": [[path, [pass_id, ...]], ...], "present": [...]}``),
+        ``BEGIN <norad> ...`` before each round of object commits and one JSON line per object
+        committed after its rename (``{"commit": norad, "files": [[path, [pass_id, ...]], ...], "present": [...]}``),
         then ``DONE <json report>``.
     python tests/archive_worker.py read ARCHIVE MANIFEST STOPFILE
         Until STOPFILE exists (and once more after), repeatedly open the archive, read every pass and compare it with
@@ -43,15 +43,15 @@ def say(line: str) -> None:
 
 def run_ingest(args) -> int:
     archive = Archive(args.archive)
-    commit = archive.commit
+    commit_many = archive.commit_many
 
-    def announced_commit(norad, files):
-        say(f"BEGIN {norad}")
-        result = commit(norad, files)
+    def announced_commit_many(batches):
+        say("BEGIN " + " ".join(str(norad) for norad in sorted(batches)))
+        result = commit_many(batches)
         time.sleep(args.commit_pause)
         return result
 
-    archive.commit = announced_commit  # only this process's instance; the library is unchanged
+    archive.commit_many = announced_commit_many  # only this process's instance; the library is unchanged
 
     def on_commit(event: CommitEvent) -> None:
         say(
@@ -111,7 +111,7 @@ def run_reader(args) -> int:
                 say(f"ERROR {item.pass_id}: {differing} differs from {path}")
                 errors += 1
             checked += 1
-        rows = archive.catalog(all_versions=True)
+        rows = archive.summaries(all_versions=True)
         shas = [row.source_sha256 for row in rows]
         if len(shas) != len(set(shas)):
             say(f"ERROR a file is stored twice: {len(shas)} rows, {len(set(shas))} distinct")

@@ -78,7 +78,7 @@ def test_real_files_round_trip_exactly(real_archive):
 
 
 def test_pass_ids_are_readable_and_stable(real_archive, tmp_path):
-    ids = {row.pass_id for row in real_archive.catalog()}
+    ids = {row.pass_id for row in real_archive.summaries()}
     assert ids == {
         "22076-20240730T212240-V-derenivka",
         "44517-20250130T173650-V-derenivka",
@@ -88,7 +88,7 @@ def test_pass_ids_are_readable_and_stable(real_archive, tmp_path):
     }
     again = Archive(tmp_path / "again")
     again.ingest(list(reversed(REAL_FILES)), progress=False, workers=0)
-    assert {row.pass_id for row in again.catalog()} == ids
+    assert {row.pass_id for row in again.summaries()} == ids
 
 
 def test_filters_and_prefix_lookup(real_archive):
@@ -160,18 +160,34 @@ def test_same_observation_under_another_name_is_a_version(tmp_path, shared_data)
     archive = Archive(tmp_path / "archive")
     archive.ingest([COSMOS2540_PHV], progress=False, workers=0)
     renamed = tmp_path / "re-export.phV"
-    renamed.write_text(COSMOS2540_PHV.read_text().replace("2025-01-30 17:41:04.985058", "2025-01-30 17:41:04.985"))
+    # A re-reduced re-export: same start second, band and site, one magnitude changed.
+    renamed.write_text(COSMOS2540_PHV.read_text().replace(" 6.124 ", " 6.125 ", 1))
     report = archive.ingest([renamed], progress=False, workers=0)
     assert report.ingested[0].pass_ids == ("44517-20250130T173650-V-derenivka-v2",)
 
 
+def test_same_rows_under_another_name_are_a_duplicate_source(tmp_path, shared_data):
+    archive = Archive(tmp_path / "archive")
+    archive.ingest([COSMOS2540_PHV], progress=False, workers=0)
+    renamed = tmp_path / "re-export.phV"
+    renamed.write_text(COSMOS2540_PHV.read_text().replace("2025-01-30 17:41:04.985058", "2025-01-30 17:41:04.985"))
+    report = archive.ingest([renamed], progress=False, workers=0)
+    assert not report.ingested
+    assert [(item.path, item.pass_ids) for item in report.duplicates] == [
+        (str(renamed), ("44517-20250130T173650-V-derenivka",))
+    ]
+    (source,) = archive.duplicate_sources("44517")
+    assert source.source_name == "re-export.phV" and len(source.sha256) == 64
+    assert archive.ingest([renamed], progress=False, workers=0).already_present == (str(renamed),)
+
+
 def test_layout_schema_and_plain_h5py(real_archive):
     marker = json.loads((real_archive.path / layout.MARKER_NAME).read_text())
-    assert marker["schema_version"] == layout.SCHEMA_VERSION == 1
+    assert marker["schema_version"] == layout.SCHEMA_VERSION == 2
     with h5py.File(real_archive.object_path(51511), "r") as file:
-        assert file.attrs["schema_version"] == 1
+        assert file.attrs["schema_version"] == 2
         assert file.attrs["norad"] == 51511
-        assert sorted(file["passes"]) == sorted(row.pass_id for row in real_archive.catalog(norad=51511))
+        assert sorted(file["passes"]) == sorted(row.pass_id for row in real_archive.summaries(norad=51511))
         samples = file["passes/51511-20250130T171941-B-uzhhorod/samples"]
         assert samples.shape == (692,)
         assert set(json.loads(file.attrs["sample_units"])) >= set(samples.dtype.names)
@@ -190,7 +206,7 @@ def test_documented_snippet_reads_the_archive_with_h5py_and_pandas(real_archive)
     namespace = {"ARCHIVE": str(real_archive.path)}
     exec(compile(_doc_snippet(), "docs/archive.md", "exec"), namespace)
     catalog, samples = namespace["catalog"], namespace["samples"]
-    rows = real_archive.catalog(all_versions=True)
+    rows = real_archive.summaries(all_versions=True)
     assert sorted(catalog["pass_id"]) == sorted(row.pass_id for row in rows)
     assert catalog["start_utc"].dtype.kind == "M"
     (topex,) = ingest.read_file(TOPEX_PHV)
@@ -327,7 +343,7 @@ def test_opening_checks_the_directory(tmp_path):
         Archive(tmp_path / "file")
     future = Archive(tmp_path / "future")
     (future.path / layout.MARKER_NAME).write_text(json.dumps({"format": "rsodb archive", "schema_version": 99}))
-    with pytest.raises(ValueError, match=r"has schema_version 99, newer than this rsodb reads \(1\); upgrade rsodb"):
+    with pytest.raises(ValueError, match=r"has schema_version 99, newer than this rsodb reads \(2\); upgrade rsodb"):
         Archive(future.path)
 
 
@@ -377,10 +393,14 @@ def test_process_pool_gives_the_same_archive(tmp_path, shared_data):
         assert_same_pass(b, a)
 
 
-def test_a_damaged_object_file_is_named(real_archive):
+def test_a_damaged_object_file_is_named_and_the_others_are_listed(real_archive):
     real_archive.object_path(44517).write_bytes(b"not HDF5 at all")
-    with pytest.raises(OSError, match=r"44517\.h5 cannot be read as HDF5 .*restore it from a backup"):
-        Archive(real_archive.path).catalog()
+    reopened = Archive(real_archive.path)
+    assert {row.norad for row in reopened.summaries()} == {22076, 51511}
+    (damaged,) = reopened.damaged()
+    assert damaged.norad == 44517 and damaged.reason.startswith("it cannot be opened as HDF5")
+    with pytest.raises(OSError, match=r"44517\.h5 is damaged: it cannot be opened as HDF5 .*rsodb check --archive"):
+        reopened.get("44517")
 
 
 def test_a_killed_creation_does_not_block_the_next(tmp_path):

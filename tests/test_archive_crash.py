@@ -18,12 +18,13 @@ import sys
 import threading
 import time
 
+import h5py
 import numpy as np
 import pytest
 
 import ingest
 from ingest.observation import ARRAY_FIELDS
-from rsodb.archive import Archive
+from rsodb.archive import Archive, layout
 from rsodb.samples.synthetic import write_synthetic_corpus
 
 WORKER = Path(__file__).with_name("archive_worker.py")
@@ -106,7 +107,13 @@ def check_archive(path: Path, committed: dict[str, list[str]], expected: dict) -
     """Everything the crash guarantee promises; returns the number of stored passes."""
     archive = Archive(path)  # opening removes what killed writers left behind
     assert not [name for name in os.listdir(archive.objects_dir) if name.endswith(".tmp")]
-    rows = archive.catalog(all_versions=True)
+    rows = archive.summaries(all_versions=True)
+    # The index, however the kill left it, answers what the object files hold.
+    on_disk = set()
+    for object_file in archive.objects_dir.glob("*.h5"):
+        with h5py.File(object_file, "r") as file:
+            on_disk |= {row.pass_id for row in layout.read_catalog(file)}
+    assert {row.pass_id for row in rows} == on_disk
     shas = [row.source_sha256 for row in rows]
     assert len(shas) == len(set(shas)), "a file was stored twice"
     stored_ids = {row.pass_id for row in rows}

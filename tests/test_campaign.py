@@ -10,12 +10,13 @@ import pytest
 
 from ingest import read_file
 from rsodb.archive import Archive
-from rsodb.campaign.fit_campaign import run_campaign, run_campaigns
+from rsodb.campaign.fit_campaign import NO_ORBIT, run_campaign, run_campaigns
 from rsodb.cli import main
 from rsodb.fit.config import FitConfig
 from rsodb.fit.coverage import inject, window
 from rsodb.fit.runner import FitProblem
-from tests.conftest import TOPEX_PHV
+from rsodb.report.index_page import build_index
+from tests.conftest import COSMOS2553_PHC, TOPEX_PHV
 
 TRUTH = {
     "spin_period_s": 9.86,
@@ -38,7 +39,7 @@ def archive(tmp_path_factory):
     archive = Archive(tmp_path_factory.mktemp("campaign") / "archive")
     passes = []
     for k, start_s in enumerate((0.0, 200.0)):
-        template = window(observed, start_s, 20.0, stride=4)
+        template = window(observed, start_s, 20.0, bin_size=4)
         model = FitProblem.build(template, FitConfig.from_dict(FIT)).posterior.model
         passes.append(inject(template, model, TRUTH, noise_mag=0.02, rng=np.random.default_rng(k)))
     archive.add(passes)
@@ -49,7 +50,7 @@ def archive(tmp_path_factory):
 def test_campaign_fits_every_pass_then_skips_them_and_reports(archive, tmp_path, capsys):
     config = FitConfig.from_dict(FIT)
     first = run_campaign(archive, 22076, config=config, n_workers=2, progress=False)
-    ids = [row.pass_id for row in archive.catalog(22076)]
+    ids = [row.pass_id for row in archive.summaries(22076)]
     assert len(ids) == 2 and first.ok
     assert sorted(r["pass_id"] for r in first.fitted) == sorted(ids)
     assert all(archive.result_names(p, "fits") == ["camp"] for p in ids)
@@ -93,7 +94,7 @@ def test_campaign_reports_a_failed_pass_and_carries_on(archive):
 def test_campaigns_share_one_client_and_report_per_group(archive):
     # Two configurations side by side (as the pipeline runs one per model): one fits its pass,
     # the other fails on its pass; each outcome holds only its own group's passes.
-    first, second = [row.pass_id for row in archive.catalog(22076)]
+    first, second = [row.pass_id for row in archive.summaries(22076)]
     good = FitConfig.from_dict(dict(FIT, name="groupgood"))
     bad = FitConfig.from_dict(dict(FIT, name="groupbad", parameters={}))
     outcomes = run_campaigns(archive, [(good, [first]), (bad, [second])], n_workers=2, progress=False)
@@ -110,3 +111,17 @@ def test_campaign_needs_a_selection(archive, capsys):
         run_campaign(archive, config=FitConfig.from_dict(FIT), progress=False)
     assert main(["campaign", "--archive", str(archive.path), "--passes", "99999-nope"]) == 2
     assert "rsodb campaign: error:" in capsys.readouterr().err
+
+
+def test_passes_without_orbital_elements_are_named_not_sent_to_dask(tmp_path):
+    # issue 19: the main job printed Dask's "Compute Failed" tracebacks for the .phc passes,
+    # which carry no elements, and its index showed "-" for them with no reason.
+    archive = Archive(tmp_path / "archive")
+    archive.ingest([COSMOS2553_PHC], progress=False)
+    ids = [row.pass_id for row in archive.summaries(51511)]
+    (outcome,) = run_campaigns(archive, [(FitConfig.from_dict(FIT), ids)], progress=False)
+    assert outcome.scheduler == "nothing to run"  # no cluster was started
+    assert outcome.failed == tuple((pass_id, NO_ORBIT) for pass_id in ids) and outcome.fitted == ()
+    missing = {pass_id: ("fits", error) for pass_id, error in outcome.failed}
+    page = build_index(archive, [], "camp", missing).to_html()
+    assert page.count("not fitted: no orbital elements") == 2 and "rsodb elements add" in page

@@ -1,4 +1,4 @@
-"""The archive commands: rsodb ingest, ls, show, export (called through main([...]))."""
+"""The archive commands: rsodb ingest, ls, show, export, check, elements (through main([...]))."""
 
 from __future__ import annotations
 
@@ -6,7 +6,10 @@ import io
 import json
 import os
 from pathlib import Path
+import re
 import shutil
+import subprocess
+import sys
 
 import numpy as np
 import pandas as pd
@@ -14,7 +17,7 @@ import pytest
 
 import ingest
 from rsodb.cli import main
-from tests.conftest import COSMOS2540_PHV, COSMOS2553_PHC, REAL_FILES, TOPEX_PHV
+from tests.conftest import COSMOS2540_PHV, COSMOS2553_PHC, PROJECT_ROOT, REAL_FILES, TOPEX_PHV
 
 TOPEX_ID = "22076-20240730T212240-V-derenivka"
 
@@ -31,7 +34,7 @@ def archive_dir(tmp_path, shared_data, capsys):
     return archive
 
 
-@pytest.mark.parametrize("command", ["ingest", "ls", "show", "export"])
+@pytest.mark.parametrize("command", ["ingest", "ls", "show", "export", "check", "elements"])
 def test_every_command_has_help_with_an_example(command, capsys):
     with pytest.raises(SystemExit) as exit_info:
         main([command, "--help"])
@@ -112,7 +115,12 @@ def test_show_text_json_and_plot(archive_dir, tmp_path, capsys):
     assert main(["show", "51511-20250130T171941-V", "--archive", str(archive_dir), "--json", "--plot", str(plot)]) == 0
     info = json.loads(capsys.readouterr().out)
     assert (info["n_points"], info["n_valid"], info["exposure_s"], info["band"]) == (692, 692, 1.0, "V")
-    assert info["site"]["name"] == "Uzhhorod" and info["results"] == {"periods": [], "fits": []}
+    assert info["site"]["name"] == "Uzhhorod" and info["results"] == {"periods": {}, "fits": {}}
+    assert info["elements_source"] is None and info["rows_set_aside"] == []
+    # The .phc file carries no elements and none were given: said with the pass, with the fix.
+    (warning,) = info["warnings"]
+    assert warning["reason"].startswith("no orbit: the file carries no orbital elements")
+    assert "rsodb elements add FILE" in warning["reason"]
     assert plot.stat().st_size > 10_000 and plot.read_bytes()[:4] == b"\x89PNG"
 
     assert main(["show", "51511", "--archive", str(archive_dir)]) == 2
@@ -122,23 +130,116 @@ def test_show_text_json_and_plot(archive_dir, tmp_path, capsys):
 def test_export_csv_round_trip(archive_dir, tmp_path, capsys):
     out = tmp_path / "topex.csv"
     assert main(["export", "22076", "--archive", str(archive_dir), "--format", "csv", "--out", str(out)]) == 0
-    frame = pd.read_csv(out, index_col="time_utc", float_precision="round_trip")
+    frame = pd.read_csv(out, comment="#", index_col="time_utc", float_precision="round_trip")
     (topex,) = ingest.read_file(TOPEX_PHV)
     assert len(frame) == len(topex)
+    assert list(frame.columns) == [
+        "mag_file",
+        "mag_corrected",
+        "mag_err",
+        "flux",
+        "flux_err",
+        "az_deg",
+        "el_deg",
+        "range_km",
+        "saturated",
+        "valid",
+    ]
     times = pd.to_datetime(frame.index, format="ISO8601").tz_localize(None).values
-    # CSV times carry microseconds; the file's times are whole milliseconds plus the shift.
-    assert np.max(np.abs(times - topex.time_utc)) <= np.timedelta64(1, "us")
-    for column in ("mag", "mag_err", "flux", "az_deg", "el_deg", "range_km", "mag_corrected"):
-        expected = topex.mag_corrected if column == "mag_corrected" else getattr(topex, column)
-        np.testing.assert_array_equal(frame[column].to_numpy(), expected)  # pandas writes repr floats
+    np.testing.assert_array_equal(times, topex.time_utc)  # to the nanosecond
+    # The file prints 3 decimals (magnitudes, angles, range) and 4 (flux): the CSV keeps them all.
+    for column, attribute in (("mag_file", "mag"), ("mag_err", "mag_err"), ("flux", "flux"), ("el_deg", "el_deg")):
+        np.testing.assert_array_equal(frame[column].to_numpy(), getattr(topex, attribute))
+    np.testing.assert_array_equal(frame["range_km"].to_numpy(), topex.range_km)
+    # The corrected magnitude is computed: 4 decimals, half a unit of the last one at most.
+    assert np.max(np.abs(frame["mag_corrected"].to_numpy() - topex.mag_corrected)) <= 5e-5
+    data = [line.split(",") for line in out.read_text().splitlines() if not line.startswith(("#", "time_utc"))]
+    assert all(re.fullmatch(r"-?\d+\.\d{4}", row[2]) for row in data)  # no 16-digit floats
     np.testing.assert_array_equal(frame["saturated"].to_numpy(), topex.saturated)
+
+    # rsodb ingests its own CSV: into the archive it came from, a duplicate source of the pass;
+    # into a new one, the same pass id and values.
+    assert main(["ingest", str(out), "--archive", str(archive_dir), "--no-progress", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["duplicates"][0]["pass_ids"] == [TOPEX_ID] and report["ingested"] == []
+    assert main(["ingest", str(out), "--archive", str(tmp_path / "new"), "--no-progress", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["ingested"][0]["pass_ids"] == [TOPEX_ID]
 
     assert main(["export", "22076", "--archive", str(archive_dir), "--format", "csv", "--out", str(out)]) == 2
     assert "exists; choose another --out or add --force" in capsys.readouterr().err
 
-    assert main(["export", "44517", "--archive", str(archive_dir), "--format", "csv"]) == 0
+    assert main(["export", "44517", "--archive", str(archive_dir)]) == 0  # CSV by default
     stdout = capsys.readouterr().out
-    assert len(pd.read_csv(io.StringIO(stdout))) == 2535
+    assert len(pd.read_csv(io.StringIO(stdout), comment="#")) == 2535
+
+
+def test_ingest_of_a_generic_csv(tmp_path, shared_data, capsys):
+    """A table from another tool: time, mag, mag_err under a small header."""
+    (cosmos,) = ingest.read_file(COSMOS2540_PHV)
+    rows = [
+        f"{t}Z,{m:.3f},{e:.3f}"
+        for t, m, e in zip(np.datetime_as_string(cosmos.time_utc, unit="ms"), cosmos.mag, cosmos.mag_err)
+    ]
+    path = tmp_path / "other_tool.csv"
+    path.write_text(
+        "# object = 44517\n# band = V\n# exposure_s = 0.1\n# site = Derenivka\ntime_utc,mag,mag_err\n"
+        + "\n".join(rows)
+        + "\n"
+    )
+    archive = tmp_path / "archive"
+    assert main(["ingest", str(path), "--archive", str(archive), "--no-progress", "--json"]) == 0
+    (item,) = json.loads(capsys.readouterr().out)["ingested"]
+    assert item["pass_ids"] == ["44517-20250130T173650-V-derenivka"]
+    assert main(["show", "44517", "--archive", str(archive), "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert (info["n_points"], info["source_format"], info["mag_median"]) == (2535, "csv", float(np.median(cosmos.mag)))
+    assert info["range_km_min"] is None and "orbit" not in info  # no geometry columns: none invented
+    # A column rsodb does not know is refused, not ignored.
+    path.write_text(path.read_text().replace("time_utc,mag,mag_err", "time_utc,mag,mag_err_v"))
+    assert main(["ingest", str(path), "--archive", str(archive), "--no-progress"]) == 1
+    assert "column 'mag_err_v' is not one rsodb reads" in capsys.readouterr().out
+
+
+def test_a_generic_csv_with_other_tools_names(tmp_path, capsys):
+    # issue 19: "a generic CSV of time, mag, mag_err with a small header of object, site, band,
+    # exposure": the column 'time' and the header key 'exposure' (seconds) are read as rsodb's.
+    path = tmp_path / "generic.csv"
+    header = "# object = 44517\n# site = Derenivka\n# band = V\n# exposure = 0.1\n"
+    rows = "".join(f"2025-02-01 17:00:0{k}.5,{6.5 + 0.01 * k:.2f},0.01\n" for k in range(5))
+    path.write_text(header + "time,mag,mag_err\n" + rows)
+    archive = str(tmp_path / "archive")
+    assert main(["ingest", str(path), "--archive", archive, "--no-progress", "--json"]) == 0
+    (item,) = json.loads(capsys.readouterr().out)["ingested"]
+    assert item["pass_ids"] == ["44517-20250201T170000-V-derenivka"]
+    assert main(["show", "44517", "--archive", archive, "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert (info["exposure_s"], info["n_points"], info["mag_max"]) == (0.1, 5, 6.54)
+    # What is missing is named with an example of its own kind.
+    path.write_text(header.replace("# exposure = 0.1\n", "") + "time,mag\n" + rows)
+    assert main(["ingest", str(path), "--archive", archive, "--no-progress"]) == 1
+    assert f"{path}:4: the CSV has no mag_err column" in capsys.readouterr().out
+    path.write_text(header.replace("# exposure = 0.1\n", "") + "time,mag,mag_err\n" + rows)
+    assert main(["ingest", str(path), "--archive", archive, "--no-progress"]) == 1
+    assert "no '# exposure_s = ' line; add it (e.g. '# exposure_s = 0.1')" in capsys.readouterr().out
+
+
+def test_default_archive_from_the_environment_or_the_directory(archive_dir, tmp_path, monkeypatch, capsys):
+    monkeypatch.setenv("RSODB_ARCHIVE", str(archive_dir))
+    assert main(["ls", "--json"]) == 0
+    assert len(json.loads(capsys.readouterr().out)) == 5
+    monkeypatch.delenv("RSODB_ARCHIVE")
+    monkeypatch.chdir(tmp_path)  # archive_dir is ./archive here
+    assert main(["show", "44517"]) == 0
+    assert capsys.readouterr().out.startswith("pass       44517-20250130T173650-V-derenivka")
+    monkeypatch.chdir(tmp_path / "observations")
+    assert main(["ls"]) == 2
+    err = capsys.readouterr().err
+    assert "no archive at 'archive'" in err and "comes from the default; give --archive DIR or set RSODB_ARCHIVE" in err
+    # The report commands take the same default (no period results stored yet: a clear error).
+    monkeypatch.chdir(tmp_path)
+    assert main(["report", "periods", "--object", "44517", "--out", "r.html"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("rsodb report periods: error:") and "rsodb periods" in err
 
 
 def test_export_eossa_reads_back(archive_dir, tmp_path, monkeypatch, capsys):
@@ -244,5 +345,16 @@ def test_ingest_of_a_directory_without_observations_says_so(tmp_path, capsys):
     (tmp_path / "frames" / "image_0001.fits").write_bytes(b"SIMPLE  =                    T")
     assert main(["ingest", str(tmp_path / "frames"), "--archive", str(tmp_path / "a"), "--no-progress"]) == 0
     assert capsys.readouterr().out.strip() == (
-        "no observation files found (directories are searched for *.ph<letter> files)"
+        "no observation files found (directories are searched for *.ph<letter> files; name other files explicitly)"
     )
+
+
+def test_the_command_line_parser_loads_no_archive_code():
+    # 'rsodb --help' and argument errors stay fast: the commands reach the archive (and h5py)
+    # through the lazy front door, only when they run.
+    code = (
+        "import sys; from rsodb.cli import build_parser; build_parser(); "
+        "print(sorted(m for m in sys.modules if m.startswith(('rsodb.archive', 'h5py', 'tqdm'))))"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=PROJECT_ROOT)
+    assert done.stdout.strip() == "[]"

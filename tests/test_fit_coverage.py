@@ -35,7 +35,7 @@ CONFIG = {
 
 @pytest.mark.slow
 def test_68_percent_intervals_hold_the_truth_about_68_percent_of_the_time(tmp_path):
-    template = window(read_file(TOPEX_PHV)[0], 0.0, 30.0, stride=4)
+    template = window(read_file(TOPEX_PHV)[0], 0.0, 30.0, bin_size=4)
     recoveries = coverage_study(
         template,
         FitConfig.from_dict(CONFIG),

@@ -33,7 +33,7 @@ def lambert_sphere(radius_m, albedo, phase_rad):
 
 @pytest.fixture(scope="module")
 def topex_window():
-    return window(read_file(TOPEX_PHV)[0], 0.0, 20.0, stride=2)
+    return window(read_file(TOPEX_PHV)[0], 0.0, 20.0, bin_size=2)
 
 
 @pytest.fixture(scope="module")

@@ -30,7 +30,7 @@ QUICK = {"n_walkers": 14, "n_steps": 120, "search_maxiter": 60, "seed": 2}
 
 
 def synthetic_archive(tmp_path, shape: str, noise_mag: float = 0.02):
-    template = window(read_file(TOPEX_PHV)[0], 0.0, 30.0, stride=3)
+    template = window(read_file(TOPEX_PHV)[0], 0.0, 30.0, bin_size=3)
     render = FitConfig.from_dict(
         {
             "model": {"shape": shape, "n_sub": 2},
@@ -119,8 +119,11 @@ def test_hdf5_layout_is_readable_with_plain_h5py(fitted, tmp_path):
         names = [n.decode() for n in group["summary"]["name"]]
         assert names == list(result.names)
         np.testing.assert_array_equal(group["summary"]["median"], result.median)
-        assert group.attrs["kind"] == "fit" and group.attrs["schema_version"] == 1
+        assert group.attrs["kind"] == "fit" and group.attrs["schema_version"] == 2
         assert group["lightcurve"].shape == result.mag_obs.shape
+        assert group["lightcurve"]["in_window"].all() and group["lightcurve"]["fitted"].all()
+        # The model curve over the pass: a row per band level, one column per fine time step.
+        assert group["curve"]["mag_band"].shape == (5, group["curve"]["time_utc"].shape[0])
 
 
 def test_plots_are_written(fitted, tmp_path):
@@ -163,7 +166,7 @@ def test_stored_draws_keep_every_walker():
     from rsodb.fit.result import MAX_STORED_SAMPLES
     from rsodb.fit.sampler import ChainRun
 
-    template = window(read_file(TOPEX_PHV)[0], 0.0, 20.0, stride=4)
+    template = window(read_file(TOPEX_PHV)[0], 0.0, 20.0, bin_size=4)
     config = FitConfig.from_dict(
         {
             "model": {"shape": "lopsided", "n_sub": 1},

@@ -233,3 +233,30 @@ def test_autocorrelation_time_ignores_walkers_that_never_moved():
     assert np.all(np.abs(tau - 9.0) < 2.0)
     np.testing.assert_allclose(tau[0], expected[0], rtol=1e-12)
     assert np.isnan(autocorr_time(np.ones((50, 4, 1))))[0]
+
+
+@pytest.mark.slow
+def test_until_converged_stops_once_the_chain_is_50_autocorrelation_times_long(tmp_path):
+    from rsodb.fit.sampler import CONVERGED_TAUS, autocorr_time
+
+    # Few points and rare checkpoints keep the thousands of steps cheap.
+    posterior = make_posterior(n=30)
+    settings = SMALL.replace(n_steps=20_000, until_converged=True, check_every=100, checkpoint_every=500)
+    run = run_sampler(posterior, settings, tmp_path / "c.h5", progress=False)
+    # The sinusoid's posterior is a near-Gaussian 2-D blob: tau is tens of steps, so it converges
+    # long before the 20000-step cap, at a check (a multiple of 100 steps).
+    assert run.stopped.startswith("stopped converged") and run.n_steps < 20_000 and run.n_steps % 100 == 0
+    kept = run.chain[run.burn_in :]
+    # The criterion holds on the kept chain by emcee's own estimate, measured independently here.
+    assert kept.shape[0] >= CONVERGED_TAUS * np.max(autocorr_time(kept)) * 0.999
+
+
+def test_time_limit_stops_sampling_and_a_rerun_continues(tmp_path):
+    posterior = make_posterior(delay_s=0.002)
+    settings = SMALL.replace(n_steps=5000, time_limit_s=2.0)
+    run = run_sampler(posterior, settings, tmp_path / "t.h5", progress=False)
+    assert run.stopped.startswith("stopped at the time limit of 2 s") and 0 < run.n_steps < 5000
+    again = run_sampler(
+        posterior, settings.replace(time_limit_s=0.0, n_steps=run.n_steps + 10), tmp_path / "t.h5", progress=False
+    )
+    assert again.resumed_from == run.n_steps and again.n_steps == run.n_steps + 10

@@ -226,7 +226,7 @@ def test_to_pandas_and_plots(topex_pass):
     assert list(frame.columns) == ["t_s", "mag", "mag_err", "trend_mag"]
     assert frame.index[0] == topex_pass.start_utc
     ax = lc.plot()
-    assert ax.yaxis_inverted() and ax.get_ylabel() == "magnitude - trend"
+    assert ax.yaxis_inverted() and ax.get_ylabel() == "V magnitude (reduced to 1000 km) - trend"
     ax = lc.fold(9.48).plot()
     assert ax.get_xlim() == (0.0, 1.0)
     ax = lc.periodogram().plot(mark_period_s=9.48)

@@ -19,10 +19,11 @@ from rsodb.campaign.period_survey import load_period_results, survey_periods
 from rsodb.cli import main
 from rsodb.cli.report import REPORT_KINDS
 from rsodb.fit.priors import Uniform
+from rsodb.periods.lightcurve import LightCurve
 from rsodb.periods.search import PeriodResult
-from rsodb.periods.trend import fit_period_trend, trend_from_results
+from rsodb.periods.trend import fit_period_trend, group_epochs, trend_from_results
 from rsodb.report.html import Document, Figure, Heading, Paragraph, Table
-from rsodb.report.period_report import build_period_report
+from rsodb.report.period_report import build_period_report, pass_figure, trend_figure
 from tests.conftest import REAL_FILES
 
 
@@ -73,7 +74,11 @@ def test_cli_table_output_and_errors(surveyed, capsys):
         == 0
     )
     out = capsys.readouterr().out
-    assert "too short" in out and "stored" not in out
+    # A header row, then one row per pass (COSMOS 2540: its slow humps, ~66.6 s).
+    header, rule, row = out.splitlines()[:3]
+    assert header.split()[:4] == ["pass", "period", "s", "+-"] and "verdict" in header and set(rule) == {"-"}
+    assert row.startswith("44517-") and float(row.split()[1]) == pytest.approx(66.6, abs=1.0)
+    assert "stored" not in out
     assert main(["periods", "--archive", str(surveyed), "--processes", "0"]) == 2
     assert "--processes 0 must be at least 1" in capsys.readouterr().err
     with pytest.raises(SystemExit):
@@ -95,8 +100,10 @@ def test_report_command_writes_a_self_contained_page(surveyed, tmp_path, capsys)
         assert picture.shape[0] > 300 and picture.shape[1] > 600
     for pass_id in ("51511-20250130T171941-B-uzhhorod", "51511-20250311T173120-V-derenivka"):
         assert pass_id in page
-    # Two confident passes (January V, March V) give a trend with its slope in s/yr.
-    assert "dP/dt =" in page and "s/yr" in page
+    # One confident pass (March V; January's two bands are "ambiguous harmonic"): the report says
+    # in words why there is no trend.
+    assert "Spin trend from the passes with verdict confident: no trend:" in page
+    assert "one night (2025-03-11, one epoch)" in page
 
 
 def test_report_without_results_says_what_to_run(tmp_path, capsys):
@@ -131,7 +138,8 @@ def test_trend_of_an_exact_line():
     sxx = np.sum((years - years.mean()) ** 2) / 0.01**2
     assert trend.slope_err_s_per_yr == pytest.approx(1 / np.sqrt(sxx), rel=1e-9)
     np.testing.assert_allclose(trend.period_s(times), periods, atol=1e-9)
-    assert "spinning up" in trend.summary()
+    assert trend.sense == "spinning up" and "spinning up: dP/dt = -0.16" in trend.summary()
+    assert trend.span_days == pytest.approx(2841.0)
 
 
 def test_trend_errors_grow_with_scatter_beyond_the_error_bars():
@@ -141,20 +149,122 @@ def test_trend_errors_grow_with_scatter_beyond_the_error_bars():
     # Residual scatter of ~0.1 s against 0.01 s errors: chi2/dof ~ 10^2, errors scaled by its root.
     assert trend.birge_ratio == pytest.approx(np.sqrt(trend.chi2_reduced))
     assert trend.birge_ratio > 5
-    with pytest.raises(ValueError, match="needs passes at two or more times, got 1"):
+    with pytest.raises(ValueError, match="needs passes at two or more epochs .nights., got 1"):
         fit_period_trend(times[:1], [10.0], [0.01])
     with pytest.raises(ValueError, match="period_err_s must be positive and finite"):
         fit_period_trend(times, np.full(4, 10.0), [0.01, 0.0, 0.01, 0.01])
 
 
+def test_passes_of_one_night_are_one_epoch_and_give_no_trend():
+    # Three passes within two hours (the case gave dP/dt = -4.8e5 +- 5.8e7 s/yr).
+    night = np.datetime64("2025-01-30T17:00", "ns") + np.array([0, 40, 110], dtype="timedelta64[m]")
+    with pytest.raises(ValueError, match="two or more epochs .nights., got 1"):
+        fit_period_trend(night, [4.93, 4.92, 4.95], [0.002, 0.003, 0.01])
+    epochs = group_epochs(night, [4.93, 4.92, 4.95], [0.002, 0.003, 0.01], pass_ids=["a", "b", "c"])
+    assert len(epochs) == 1 and epochs[0].n_passes == 3 and epochs[0].pass_ids == ("a", "b", "c")
+    # The epoch's period is the weighted mean; the passes disagree beyond their errors, so its
+    # error is scaled by the Birge ratio (chi2 = 4.1 on 2 degrees of freedom here).
+    w = 1 / np.array([0.002, 0.003, 0.01]) ** 2
+    mean = np.sum(w * [4.93, 4.92, 4.95]) / w.sum()
+    chi2 = np.sum(w * (np.array([4.93, 4.92, 4.95]) - mean) ** 2)
+    assert epochs[0].period_s == pytest.approx(mean, rel=1e-12)
+    assert epochs[0].period_err_s == pytest.approx(np.sqrt(chi2 / 2) / np.sqrt(w.sum()), rel=1e-9)
+    # Two nights a day apart: epochs, but less than the 7 days a trend needs.
+    with pytest.raises(ValueError, match="span 1 days, less than the 7 days"):
+        fit_period_trend(np.concatenate([night, night + np.timedelta64(1, "D")]), np.full(6, 4.93), np.full(6, 0.01))
+
+
+def test_a_trend_is_claimed_only_at_two_sigma_otherwise_its_bound_is_given():
+    times = np.array(["2025-01-30", "2025-03-11"], dtype="datetime64[ns]")
+    # The second case: -0.165 +- 0.38 s/yr was called "spinning up" at under 1 sigma.
+    years = 40 / 365.25
+    weak = fit_period_trend(times, [4.93, 4.93 - 0.165 * years], np.full(2, 0.38 * years / np.sqrt(2)))
+    assert weak.slope_err_s_per_yr == pytest.approx(0.38, rel=1e-9)
+    assert weak.sense == "no significant trend"
+    assert weak.bound_s_per_yr == pytest.approx(0.165 + 2 * 0.38, rel=1e-9)
+    assert "no significant trend: dP/dt = -0.165 +- 0.38 s/yr (0.4 sigma), |dP/dt| < 0.93 s/yr" in weak.summary()
+    strong = fit_period_trend(times, [4.930, 4.849], [0.001, 0.001])
+    assert strong.sense == "spinning up" and strong.significance > 2
+
+
+@pytest.mark.parametrize("n_epochs", [2, 5])
+def test_false_trend_claims_stay_at_the_two_sigma_rate_and_real_trends_are_found(n_epochs):
+    # Periods with no trend, scattered by exactly their stated errors: "spinning up/down" must be
+    # claimed no more often than a 2-sigma two-sided test allows, 4.55% (two epochs: the error is
+    # exact; more: the Birge ratio only ever widens it). 500 trials: binomial sigma 0.93%, so
+    # the bound below is 3 sigma above 4.55%.
+    rng = np.random.default_rng(n_epochs)
+    days = np.sort(rng.uniform(0, 300, n_epochs))
+    days[0], days[-1] = 0.0, 300.0
+    times = np.datetime64("2025-01-30T18:00", "ns") + (days * 86400e9).astype("timedelta64[ns]")
+    sigma = rng.uniform(0.001, 0.01, n_epochs)
+    trials = 500
+    claims = sum(
+        fit_period_trend(times, 9.5 + rng.normal(0, sigma), sigma).sense != "no significant trend"
+        for _ in range(trials)
+    )
+    assert claims / trials <= 0.0455 + 3 * 0.0093
+    # A spin-up of 4 standard errors is claimed, in the right sense, in nearly every trial
+    # (expected 97.7% with known errors; fewer when a Birge ratio above 1 widens the error).
+    error = fit_period_trend(times, np.full(n_epochs, 9.5), sigma).slope_err_s_per_yr
+    years = (days - days.mean()) / 365.25
+    found = [fit_period_trend(times, 9.5 - 4 * error * years + rng.normal(0, sigma), sigma).sense for _ in range(100)]
+    assert found.count("spinning up") >= 85
+
+
 def test_trend_from_results_counts_the_synodic_correction_as_error(surveyed):
     results = load_period_results(Archive(surveyed, create=False), 51511)
-    trend = trend_from_results(results)
-    confident = [r for r in results if r.verdict == "confident"]
-    assert trend.n_points == len(confident) == 2
-    # Two passes: the line goes through both; January 4.930 s -> March 4.849 s is a spin-up.
-    assert trend.slope_s_per_yr < 0
-    assert trend_from_results(results[:1]) is None
+    # January (phc, both bands) says "ambiguous harmonic", March "confident".
+    confident = trend_from_results(results)
+    assert confident.trend is None and "one night (2025-03-11, one epoch)" in confident.note
+    both = trend_from_results(results, ("confident", "ambiguous harmonic"))
+    trend = both.trend
+    assert [e.n_passes for e in both.epochs] == [2, 1] and trend.n_points == 2
+    # January 4.93 s -> March 4.85 s: a spin-up at many sigma (each error includes the March
+    # pass's synodic correction, the phc pass has no elements).
+    march = next(r for r in results if r.band == "V" and str(r.epoch_utc).startswith("2025-03"))
+    assert march.synodic is not None
+    assert trend.epochs[1].period_err_s == pytest.approx(np.hypot(march.uncertainty_s, march.synodic.max_correction_s))
+    assert trend.sense == "spinning up" and trend.slope_s_per_yr < 0
+    assert "2 epochs (2025-01-30, 2025-03-11) spanning 40 days" in both.summary()
+    assert trend_from_results(results[:0]).note == "no trend: no pass has verdict 'confident'"
+
+
+def test_trend_figure_has_a_dated_axis_and_the_line_through_the_epochs(surveyed):
+    results = load_period_results(Archive(surveyed, create=False), 51511)
+    spin_trend = trend_from_results(results, ("confident", "ambiguous harmonic"))
+    fig = trend_figure(results, spin_trend)
+    ax = fig.axes[0]
+    fig.canvas.draw()
+    labels = " ".join(t.get_text() for t in ax.get_xticklabels()) + ax.xaxis.get_offset_text().get_text()
+    # Month names or dates on the axis, not day numbers like "43.0".
+    assert re.search(r"Feb|Mar|2025", labels), labels
+    assert not re.search(r"\b\d+\.\d\b", labels), labels
+    # The line is drawn from the first to the last epoch only, through the data's range.
+    line = next(line for line in ax.get_lines() if line.get_label().startswith("trend"))
+    y = line.get_ydata()
+    periods = [e.period_s for e in spin_trend.epochs]
+    assert min(periods) - 0.01 <= y.min() and y.max() <= max(periods) + 0.01
+    low, high = ax.get_ylim()
+    assert low < min(periods) and max(periods) < high and high - low < 0.5
+
+
+def test_pass_figure_axes_come_from_the_data(surveyed):
+    archive = Archive(surveyed, create=False)
+    stored = archive.passes(norad=44517)[0]
+    result = archive.load_result(stored.pass_id, "periods", "default", PeriodResult.from_hdf5)
+    lc = LightCurve.from_pass(stored)
+    fig = pass_figure(result, lc)
+    curve, power, fold, colour_bar = fig.axes
+    assert colour_bar.get_ylabel().startswith("cycle")  # the fold's colours have a key
+    assert fold.get_ylabel() == f"{lc.band} magnitude (reduced to 1000 km) - trend"
+    bottom, top = curve.get_ylim()
+    # Brighter up, and the range is the data's (within 15% margins), whatever the model does.
+    assert bottom > top
+    assert top <= lc.mag.min() + 0.05 and bottom >= lc.mag.max() - 0.05
+    assert bottom - top < 1.5 * np.ptp(lc.mag)
+    # The reported candidate is marked with its error on the periodogram.
+    assert any("reported 66" in text.get_text() for text in power.get_legend().get_texts())
 
 
 # -- HTML builder ------------------------------------------------------------------------------

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+import re
 
 import pytest
 
@@ -78,17 +79,60 @@ def test_pipeline_on_the_samples_writes_reports_and_fits_near_the_truth(tmp_path
     for name in ("22076_periods.html", "22076_fits.html", "40358_periods.html", "40358_fits.html"):
         assert (reports / name).stat().st_size > 10_000, name
         assert f'href="{name}"' in page
-    assert page.count("<tr>") == 1 + 5  # the header and one row per pass
+    assert len(re.findall(r"<tr[ >]", page)) == 1 + 5  # the header and one row per pass
+    # Every pass has a trust level, and each fits page a corner and a trace plot per pass.
+    assert len(re.findall(r'<tr class="trust-(high|medium|low)">', page)) == 5
+    for norad, passes in ((22076, 2), (40358, 3)):
+        fits_page = (reports / f"{norad}_fits.html").read_text()
+        assert fits_page.count("Posterior of the free parameters") == passes
+        assert fits_page.count("Every walker's trace") == passes
+        assert fits_page.count("Trust: ") == passes
+    # The fits are stored as "quick": the report command says so instead of "run a campaign".
+    assert main(["report", "campaign", "--archive", str(tmp_path / "archive"), "--object", "22076"]) != 0
+    assert "give --name quick" in capsys.readouterr().err
 
     archive = Archive(tmp_path / "archive", create=False)
-    for row in archive.catalog():
+    for row in archive.summaries():
         stored = archive.get(row.pass_id)
         record = truth_by_file[stored.source_name]
         fit = archive.load_result(row.pass_id, "fits", "quick", FitResult.from_hdf5).to_dict()
         spin = fit["parameters"]["spin_period_s"]
         prior = Uniform(*load_periods(archive, row.pass_id).prior_interval_s())
         assert prior.low <= spin["p16"] <= spin["median"] <= spin["p84"] <= prior.high, (stored.source_name, spin)
+        # The fit reports its spin period in every convention (rsodb.fit.conventions).
+        conventions = fit["spin_periods"]["conventions"]
+        assert set(conventions) == {"parameter", "orbit_frame", "inertial", "light_curve"}
         if record["norad"] == 22076:
-            # The short fit finds TOPEX's mode: a period 0.3% off would slip the glints by a
-            # third of a turn over the pass's 12 cycles, which the data rule out.
-            assert spin["median"] == pytest.approx(record["truth"]["spin_period_s"], rel=3e-3), stored.source_name
+            # Like with like: the light curve's period, which the data pin, against the truth's
+            # light-curve period (the same convention computed from the true state over the
+            # pass). The fitted spin_period_s is relative to the precessing frame and trades
+            # against the precession over a 2-minute pass (P_pr = 4000 s): it is not compared.
+            # 0.3%: the period search on the noiseless curve differs from the truth's mean
+            # light-curve rate by up to 0.2% on these passes (truth.json: 9.8108 vs 9.8299 s).
+            truth = truth_light_curve_period_s(stored, record["truth"])
+            assert conventions["light_curve"]["median"] == pytest.approx(truth, rel=3e-3), (
+                stored.source_name,
+                conventions,
+            )
+
+
+def truth_light_curve_period_s(stored, truth: dict) -> float:
+    """The light-curve (synodic) period of the true spin state over the pass (rsodb.fit.conventions,
+    checked against closed forms in tests/test_fit_conventions.py)."""
+    import numpy as np
+
+    from rsodb.fit.conventions import STEPS_PER_CYCLE, rates_hz
+    from rsodb.fit.curves import geometry_at
+    from rsodb.fit.model import ConvexFacets, SpinStateModel
+
+    count = int(stored.duration_s / truth["spin_period_s"] * STEPS_PER_CYCLE) + 2
+    seconds = np.linspace(0.0, stored.duration_s, count)
+    times = stored.time_utc[0] + (seconds * 1e9).round().astype("int64").astype("timedelta64[ns]")
+    geometry = geometry_at(stored, times, 0.0, 1, None)
+    values = {k: v for k, v in truth.items() if k.endswith(("_s", "_deg")) and k != "panel_pitch_deg"}
+    # Phases at the pass's mid-time, as the samples were rendered and as fits refer them.
+    axis = {"spin_axis": truth["spin_axis"]}
+    model = SpinStateModel(
+        geometry, ConvexFacets.box(), "precessing", axis, (), stored.band, 1000.0, 0.5 * stored.duration_s
+    )
+    return 1.0 / rates_hz(model, values, geometry, truth["spin_axis"])["light_curve"]

@@ -191,11 +191,11 @@ def test_read_pass(shared_data):
 
 
 def test_reader_table_and_format_argument(shared_data):
-    assert set(READERS) == {"ccd_phot", "phc"}
+    assert set(READERS) == {"ccd_phot", "phc", "csv"}
     (p,) = READERS["ccd_phot"].read(TOPEX_PHV)
     assert len(p) == 2320
-    with pytest.raises(ValueError, match="format='csv' is not one of 'auto', 'ccd_phot', 'phc'"):
-        ingest.read_file(TOPEX_PHV, format="csv")
+    with pytest.raises(ValueError, match="format='fits' is not one of 'auto', 'ccd_phot', 'phc', 'csv'"):
+        ingest.read_file(TOPEX_PHV, format="fits")
     with pytest.raises(FormatError, match="column line"):
         ingest.read_file(COSMOS2553_PHC, format="ccd_phot")
 

@@ -294,9 +294,11 @@ class PassGeometry:
         elif getattr(observed, "omm", None):
             satellite = Satellite.from_omm(observed.omm)
         else:
+            name = getattr(observed, "pass_id", None) or getattr(observed, "source_name", observed)
             raise ValueError(
-                f"pass {getattr(observed, 'source_name', observed)!r} carries neither a TLE nor an OMM "
-                "record; build a Satellite yourself and call PassGeometry.compute"
+                f"pass {name!r} carries no orbital elements (neither a TLE nor an OMM record), so it has no "
+                "geometry: add them to the archive with 'rsodb elements add TLE_FILE', or build a Satellite "
+                "and call PassGeometry.compute"
             )
         times = observed.time_utc if samples is None else observed.time_utc[np.asarray(samples)]
         return cls.compute(

@@ -49,8 +49,8 @@ __all__ = [
 
 AUTO_CACHE_MIN_DIRECTIONS = 3000
 # Above this many triangles the direct renderer samples adaptively with rays instead of scan
-# converting its grid (on the two bench models, 540 and 2184 triangles, scan conversion gives
-# the grid's result 7-8x and 2-3x faster; its cost per frame grows with the triangle count).
+# converting its grid: scan conversion gives the grid's result faster on small meshes, but its
+# cost per frame grows with the triangle count (bench/render.py times both).
 RASTER_MAX_TRIANGLES = 20_000
 
 

@@ -1,51 +1,50 @@
-"""`Archive`: the observation database, one crash-safe HDF5 file per object.
+"""`Archive`: the observation database, one crash-safe HDF5 file per object, and its catalog index.
 
-Every write (new passes, a period or fit result) follows one protocol under the object's lock:
-read the current object file, build its next state in a temporary file beside it (a byte copy of
-the current file, then appends), fsync, rename over the current file, fsync the directory. The
-rename is the commit point. Readers open the current file read-only and see one consistent state;
-a killed writer leaves at most a temporary file, removed the next time the object is written or
-the archive is opened.
+Every write (new passes, a period or fit result, orbital elements) follows one protocol under the
+object's lock: read the current object file, build its next state in a temporary file beside it,
+flush, rename over the current file, flush the directory (`rsodb.archive.commits`). The rename is
+the commit point. Readers open the current file read-only and see one consistent state; a killed
+writer leaves at most a temporary file, removed the next time the object is written or the
+archive is opened. Lookups go through the catalog index (`rsodb.archive.index`), which is checked
+against the files and read again from them whenever it is stale.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from contextlib import contextmanager
 from dataclasses import replace
-from datetime import UTC, datetime
 import json
 import os
 from pathlib import Path
 import re
-import shutil
 
 import h5py
 import numpy as np
 
+from ingest.elements import DEFAULT_MAX_AGE_DAYS, ElementCatalogue
 from ingest.observation import Pass
 from rsodb.archive import layout
-from rsodb.archive.ingest_report import CommitEvent, IngestedFile, IngestReport, PendingFile
+from rsodb.archive.commits import ObjectTransaction, stage_files, stage_metadata, stage_results, utc_now
+from rsodb.archive.index import CatalogIndex, ObjectState, PassQuery
+from rsodb.archive.ingest_report import CommitEvent, IngestReport, PendingFile
 from rsodb.archive.ingestion import run_ingest
+from rsodb.archive.integrity import DamagedObjectError, check_result, open_object
 from rsodb.archive.locking import ObjectLock, replacing, stale_temp_files
-from rsodb.archive.stored import ArchivedObject, PassSummary, StoredPass
+from rsodb.archive.stored import ArchivedObject, DamagedObject, PassSummary, ResultSummary, StoredPass
 
-__all__ = ["Archive", "UnknownPassError"]
+__all__ = ["Archive", "UnknownPassError", "ElementsReport"]
 
-# Rewrite an object file from scratch (instead of copying its bytes) once the space left behind
-# by replaced catalogs and results exceeds this share of the file.
-_REPACK_FRACTION = 0.25
-_REPACK_MIN_BYTES = 4 << 20
 _RESULT_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+=-]*$")
 _TEMP_NAME = re.compile(r"^\.(\d+)\.h5\..*\.tmp$")
+_OBJECT_NAME = re.compile(r"^(\d+)\.h5$")
+_NORAD_PREFIX = re.compile(r"^(\d+)-")
+_FILTERS = {"all_versions", "since", "until", "period_min", "period_max", "verdict", "periods_name"}
+# Objects read into the index per transaction while it is rebuilt.
+_INDEX_BATCH = 256
 
 
 class UnknownPassError(LookupError):
     """No stored pass matches an id (or the prefix matches several)."""
-
-
-def _utc_now() -> str:
-    return datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
 
 
 class Archive:
@@ -69,16 +68,17 @@ class Archive:
     >>> archive = Archive("archive")                                   # doctest: +SKIP
     >>> report = archive.ingest(["night1/", "night2/lc.phV"])          # doctest: +SKIP
     >>> archive.passes(norad=22076)[0].detrend().periodogram()         # doctest: +SKIP
+    >>> archive.catalog(period_min=5, period_max=20)                   # doctest: +SKIP
     """
 
     def __init__(self, path, *, create: bool = True, durable: bool = True, lock_timeout_s: float | None = 600.0):
         self.path = Path(path)
         self.durable = durable
         self.lock_timeout_s = lock_timeout_s
-        self._catalog_cache: dict[Path, tuple[tuple, list[PassSummary], dict]] = {}
         self._open_or_create(create)
         if os.access(self.objects_dir, os.W_OK):
             self._remove_stale_temp_files()
+        self._index = CatalogIndex(self.path / layout.INDEX_NAME)
 
     def __repr__(self) -> str:
         return f"Archive({str(self.path)!r})"
@@ -108,7 +108,8 @@ class Archive:
                     f"archive {str(self.path)!r} has schema_version {version}, newer than this rsodb reads "
                     f"({layout.SCHEMA_VERSION}); upgrade rsodb"
                 )
-            self.objects_dir.mkdir(exist_ok=True)
+            if os.access(self.path, os.W_OK):
+                self.objects_dir.mkdir(exist_ok=True)
             return
         if not create:
             raise ValueError(
@@ -122,78 +123,144 @@ class Archive:
                 "archive; give a new or empty directory"
             )
         self.path.mkdir(parents=True, exist_ok=True)
-        info = {"format": layout.FORMAT_NAME, "schema_version": layout.SCHEMA_VERSION, "created_utc": _utc_now()}
+        info = {"format": layout.FORMAT_NAME, "schema_version": layout.SCHEMA_VERSION, "created_utc": utc_now()}
         with replacing(marker, durable=self.durable) as tmp:
             tmp.write_text(json.dumps(info, indent=1) + "\n")
         self.objects_dir.mkdir(exist_ok=True)
 
-    def _lock(self, norad: int) -> ObjectLock:
+    def object_lock(self, norad: int) -> ObjectLock:
+        """The lock an object's writers take (a context manager)."""
         return ObjectLock(self.objects_dir / layout.lock_file_name(norad), timeout_s=self.lock_timeout_s)
 
     def _remove_stale_temp_files(self) -> None:
         """Delete temporary files of killed writers; objects being written right now are skipped."""
         norads = {int(match.group(1)) for match in map(_TEMP_NAME.match, os.listdir(self.objects_dir)) if match}
         for norad in sorted(norads):
-            lock = self._lock(norad)
+            lock = self.object_lock(norad)
             if lock.acquire(blocking=False):
                 try:
-                    self._remove_own_temp_files(norad)
+                    for path in stale_temp_files(self.objects_dir, layout.object_file_name(norad)):
+                        path.unlink(missing_ok=True)
                 finally:
                     lock.release()
 
-    def _object_norads(self) -> list[int]:
-        norads = []
-        for name in os.listdir(self.objects_dir):
-            stem, _, suffix = name.partition(".")
-            if suffix == "h5" and stem.isdigit():
-                norads.append(int(stem))
-        return sorted(norads)
+    def _transaction(self) -> ObjectTransaction:
+        return ObjectTransaction(self.objects_dir, self._index, self.durable, self.lock_timeout_s)
+
+    # -- the index ------------------------------------------------------------------------------
+    def _refresh(self, norads: Iterable[int] | None = None) -> None:
+        """Bring the index up to date with the object files (all, or those of `norads`)."""
+        if norads is not None:
+            wanted = sorted({int(norad) for norad in norads})
+            known = self._index.states(wanted)
+            stale, gone = [], []
+            for norad in wanted:
+                try:
+                    stat = os.stat(self.object_path(norad))
+                except FileNotFoundError:
+                    if norad in known:
+                        gone.append(norad)
+                    continue
+                if norad not in known or not known[norad].matches(stat):
+                    stale.append((norad, stat))
+            self._reindex(stale, gone)
+            return
+        try:
+            directory = os.stat(self.objects_dir)
+        except FileNotFoundError:
+            return
+        if self._index.directory_unchanged(directory):
+            return
+        on_disk = {}
+        with os.scandir(self.objects_dir) as entries:
+            for entry in entries:
+                match = _OBJECT_NAME.match(entry.name)
+                if match:
+                    try:
+                        on_disk[int(match.group(1))] = entry.stat()
+                    except FileNotFoundError:
+                        continue
+        known = self._index.states()
+        stale = [
+            (norad, stat) for norad, stat in on_disk.items() if norad not in known or not known[norad].matches(stat)
+        ]
+        self._reindex(stale, [norad for norad in known if norad not in on_disk])
+        self._index.remember_sweep(directory)
+
+    def _reindex(self, stale: Sequence[tuple[int, os.stat_result]], gone: Sequence[int]) -> None:
+        if gone:
+            self._index.remove_objects(gone)
+        for start in range(0, len(stale), _INDEX_BATCH):
+            entries = []
+            for norad, stat in stale[start : start + _INDEX_BATCH]:
+                entry = self._read_index_entry(norad, stat)
+                if entry is not None:
+                    entries.append(entry)
+            damaged = [entry for entry in entries if entry[0].status == "damaged"]
+            for entry in damaged:
+                self._index.mark_damaged(entry[0])
+            self._index.replace_objects(entry for entry in entries if entry[0].status != "damaged")
+
+    def _read_index_entry(self, norad: int, stat: os.stat_result):
+        """What the index records of one object, read from its file (None when it vanished)."""
+        path = self.object_path(norad)
+        try:
+            with open_object(path) as file:
+                state = ObjectState.of(norad, os.fstat(file.id.get_vfd_handle()))
+                return (
+                    state,
+                    _text(file.attrs.get("name", "")),
+                    _text(file.attrs.get("cospar", "")),
+                    layout.read_catalog(file),
+                    layout.read_results(file),
+                    layout.read_duplicates(file),
+                )
+        except FileNotFoundError:
+            return None
+        except DamagedObjectError as exc:
+            return (ObjectState.of(norad, stat, "damaged", exc.reason),)
+        except (OSError, RuntimeError, KeyError, ValueError) as exc:
+            reason = f"its tables cannot be read ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})"
+            return (ObjectState.of(norad, stat, "damaged", reason),)
+
+    def known_sha256(self) -> set[str]:
+        """SHA-256 of every stored file: sources of passes and duplicate sources."""
+        self._refresh()
+        return self._index.known_sha256()
+
+    def rebuild_index(self) -> int:
+        """Read every object file into a fresh index; returns the number of objects indexed."""
+        self._index.clear()
+        self._refresh()
+        return len(self._index.states())
 
     # -- reading -----------------------------------------------------------------------------
-    def _object_catalog(self, norad: int) -> tuple[list[PassSummary], dict]:
-        """Catalog rows and root attributes of one object file (cached until the file changes)."""
-        path = self.object_path(norad)
-        stat = path.stat()
-        key = (stat.st_ino, stat.st_mtime_ns, stat.st_size)
-        cached = self._catalog_cache.get(path)
-        if cached is not None and cached[0] == key:
-            return cached[1], cached[2]
-        with _open_object(path) as file:
-            rows = layout.read_catalog(file)
-            attrs = {name: file.attrs[name] for name in file.attrs}
-        self._catalog_cache[path] = (key, rows, attrs)
-        return rows, attrs
+    def _query(self, norad=None, band=None, site=None, **filters) -> PassQuery:
+        unknown = sorted(set(filters) - _FILTERS)
+        if unknown:
+            raise TypeError(f"{unknown[0]!r} is not a filter; the filters are {', '.join(sorted(_FILTERS))}")
+        if norad is not None and (isinstance(norad, bool) or not isinstance(norad, (int, np.integer))):
+            raise TypeError(f"norad={norad!r} must be an integer NORAD catalogue number")
+        for key in ("since", "until"):
+            if filters.get(key) is not None:
+                filters[f"{key}_utc"] = _as_datetime(filters.pop(key), key)
+            else:
+                filters.pop(key, None)
+        for key in ("period_min", "period_max"):
+            value = filters.pop(key, None)
+            if value is not None:
+                value = float(value)
+                if not np.isfinite(value) or value < 0:
+                    raise ValueError(f"{key}={value!r} must be a non-negative number of seconds")
+            filters[f"{key}_s"] = value
+        query = PassQuery(norad=None if norad is None else int(norad), band=band, site=site, **filters)
+        self._refresh(None if norad is None else [norad])
+        return query
 
-    def catalog(
-        self, norad: int | None = None, band: str | None = None, site: str | None = None, *, all_versions: bool = False
+    def summaries(
+        self, norad: int | None = None, band: str | None = None, site: str | None = None, **filters
     ) -> list[PassSummary]:
         """One `PassSummary` per pass, sorted by start time, without reading any arrays.
-
-        Parameters are those of `passes`.
-        """
-        if norad is not None and not isinstance(norad, (int, np.integer)):
-            raise TypeError(f"norad={norad!r} must be an integer NORAD catalogue number")
-        site_key = None if site is None else site.strip().lower()
-        rows = []
-        for object_norad in self._object_norads() if norad is None else [int(norad)]:
-            try:
-                object_rows, _ = self._object_catalog(object_norad)
-            except FileNotFoundError:
-                continue
-            rows.extend(
-                row
-                for row in object_rows
-                if (all_versions or row.is_current)
-                and (band is None or row.band == band)
-                and (site_key is None or row.site.lower() == site_key)
-            )
-        rows.sort(key=lambda row: (row.start_utc, row.pass_id))
-        return rows
-
-    def passes(
-        self, norad: int | None = None, band: str | None = None, site: str | None = None, *, all_versions: bool = False
-    ) -> list[StoredPass]:
-        """Stored passes, sorted by start time.
 
         Parameters
         ----------
@@ -205,14 +272,88 @@ class Archive:
             Only this site (name, case-insensitive).
         all_versions : bool
             Include versions superseded by a changed file (default: current versions only).
+        since, until : datetime64, str or astropy Time, optional
+            Only passes starting at or after `since` and before `until` (UTC).
+        period_min, period_max : float, optional
+            Only passes whose stored period (result `periods_name`) lies in this range, seconds.
+        verdict : str, optional
+            Only passes whose stored period result has this verdict (e.g. ``"confident"``).
+        periods_name : str
+            The stored period result the period filters and columns use (default "default").
+
+        Raises
+        ------
+        TypeError
+            For a filter not listed here.
+        """
+        return list(self.iter_summaries(norad, band, site, **filters))
+
+    def iter_summaries(
+        self, norad: int | None = None, band: str | None = None, site: str | None = None, **filters
+    ) -> Iterator[PassSummary]:
+        """The passes `summaries` selects, one at a time (what ``rsodb ls`` streams)."""
+        return self._index.passes(self._query(norad, band, site, **filters))
+
+    def catalog(self, norad: int | None = None, band: str | None = None, site: str | None = None, **filters):
+        """Every pass selected as a pandas DataFrame, one row per pass, by start time.
+
+        Columns: ``pass_id``, ``lineage_id``, ``version``, ``supersedes``, ``superseded_by``,
+        ``norad``, ``name``, ``band``, ``site``, ``start_utc``, ``end_utc`` (datetime64[ns],
+        UTC), ``duration_s``, ``n_points``, ``exposure_s``, ``source_name``, ``source_sha256``,
+        ``source_format``, ``ingested_utc``, ``n_row_problems``, ``n_warnings``, ``elements``
+        ("header", "catalogue" or ""), and from the stored period result `periods_name`:
+        ``period_s``, ``period_err_s``, ``verdict`` (NaN / None without one). The filters are
+        those of `summaries`; the query runs on the catalog index, so it costs what its result
+        costs, not what the archive holds.
+
+        Examples
+        --------
+        >>> frame = archive.catalog(period_min=5, period_max=20, verdict="confident")  # doctest: +SKIP
+        >>> frame.groupby("norad").period_s.median()                                    # doctest: +SKIP
+        """
+        # pandas costs about half a second to import; only this conversion needs it.
+        import pandas as pd
+
+        sql, params = self._index.frame_sql(self._query(norad, band, site, **filters))
+        with self._index.guarded() as connection:
+            frame = pd.read_sql_query(sql, connection, params=params)
+        for column in ("start_utc", "end_utc"):
+            frame[column] = pd.to_datetime(frame[column], unit="ns")
+        frame.insert(
+            frame.columns.get_loc("end_utc") + 1, "duration_s", (frame.end_utc - frame.start_utc).dt.total_seconds()
+        )
+        for column in ("supersedes", "superseded_by", "verdict"):
+            frame[column] = frame[column].where(frame[column].notna() & (frame[column] != ""), None)
+        return frame
+
+    def damaged(self, norad: int | None = None) -> list[DamagedObject]:
+        """Object files that cannot be read (all, or that of `norad`); ``rsodb check --repair``
+        moves them aside."""
+        self._refresh(None if norad is None else [norad])
+        return [replace(item, path=str(self.object_path(item.norad))) for item in self._index.damaged(norad)]
+
+    def passes(
+        self, norad: int | None = None, band: str | None = None, site: str | None = None, *, all_versions: bool = False
+    ) -> list[StoredPass]:
+        """Stored passes, sorted by start time.
+
+        Parameters
+        ----------
+        norad, band, site, all_versions
+            As in `summaries`.
 
         Returns
         -------
         list of StoredPass
+
+        Raises
+        ------
+        DamagedObjectError
+            When an object file holding a selected pass is damaged (named in the message).
         """
         wanted: dict[int, set[str]] = {}
         order = {}
-        for i, row in enumerate(self.catalog(norad, band, site, all_versions=all_versions)):
+        for i, row in enumerate(self.iter_summaries(norad, band, site, all_versions=all_versions)):
             wanted.setdefault(row.norad, set()).add(row.pass_id)
             order[row.pass_id] = i
         found = []
@@ -221,11 +362,21 @@ class Archive:
         found.sort(key=lambda stored: order[stored.pass_id])
         return found
 
-    def _read_passes(self, norad: int, pass_ids: set[str]) -> list[StoredPass]:
+    def _read_passes(self, norad: int, pass_ids: set[str], retry: bool = True) -> list[StoredPass]:
         """Read the given passes of one object from its current file (one consistent snapshot)."""
-        with _open_object(self.object_path(norad)) as file:
-            superseded_by = {row.pass_id: row.superseded_by for row in layout.read_catalog(file)}
-            return [layout.read_pass(file["passes"][pass_id], superseded_by[pass_id]) for pass_id in pass_ids]
+        path = self.object_path(norad)
+        with open_object(path) as file:
+            try:
+                superseded_by = {row.pass_id: row.superseded_by for row in layout.read_catalog(file)}
+                missing = [pass_id for pass_id in pass_ids if pass_id not in superseded_by]
+                if not missing:
+                    return [layout.read_pass(file["passes"][pass_id], superseded_by[pass_id]) for pass_id in pass_ids]
+            except (layout.DamagedPassError, RuntimeError, KeyError) as exc:
+                raise DamagedObjectError(path, str(exc).splitlines()[0] if str(exc) else type(exc).__name__) from None
+        if retry:  # the index was behind the file (it changed since): read the file into it, look again
+            self._refresh([norad])
+            return self._read_passes(norad, pass_ids, retry=False)
+        raise UnknownPassError(f"passes {', '.join(sorted(missing))} are no longer in {path}; run 'rsodb ls' again")
 
     def summary(self, pass_id: str) -> PassSummary:
         """The catalog row of a pass; `pass_id` may be a unique prefix of the id.
@@ -237,57 +388,78 @@ class Archive:
         ------
         UnknownPassError
             When nothing matches, or the prefix matches several passes.
+        DamagedObjectError
+            When nothing matches and the object the prefix names has a damaged file.
         """
         if not isinstance(pass_id, str) or not pass_id.strip():
             raise UnknownPassError(f"pass id {pass_id!r} is empty; run 'rsodb ls' to list pass ids")
         pass_id = pass_id.strip()
-        rows = self.catalog(all_versions=True)
-        exact = [row for row in rows if row.pass_id == pass_id]
-        if exact:
-            return exact[0]
-        matches = [row for row in rows if row.pass_id.startswith(pass_id)]
-        if len({row.lineage_id for row in matches}) == 1:
+        named = _NORAD_PREFIX.match(pass_id)
+        self._refresh([int(named.group(1))] if named else None)
+        query = PassQuery(all_versions=True, pass_id_prefix=pass_id)
+        matches = []
+        for row in self._index.passes(query):
+            if row.pass_id == pass_id:
+                return row
+            matches.append(row)
+            if len({item.lineage_id for item in matches}) > 1 and len(matches) >= 5:
+                break
+        if matches and len({row.lineage_id for row in matches}) == 1:
             # Versions of one pass: the prefix names the pass, so give its current version.
-            return next(row for row in matches if row.is_current)
+            current = [row for row in matches if row.is_current]
+            return current[0] if current else matches[-1]
         if not matches:
+            # A pass of a damaged object is not in the index: say so rather than "no pass".
+            digits = named.group(1) if named else re.match(r"^\d*", pass_id).group(0)
+            for item in self._index.damaged(int(digits)) if named else self._index.damaged() if digits else []:
+                if named or str(item.norad).startswith(digits):
+                    raise DamagedObjectError(self.object_path(item.norad), item.reason)
             raise UnknownPassError(
                 f"no pass {pass_id!r} in archive {str(self.path)!r}; run 'rsodb ls --archive {self.path}' "
                 "to list pass ids"
             )
-        shown = ", ".join(row.pass_id for row in matches[:5]) + (", ..." if len(matches) > 5 else "")
-        raise UnknownPassError(
-            f"pass id prefix {pass_id!r} matches {len(matches)} passes ({shown}); give more of the id"
-        )
+        count = self._index.count(query)
+        shown = ", ".join(row.pass_id for row in matches[:5]) + (", ..." if count > 5 else "")
+        raise UnknownPassError(f"pass id prefix {pass_id!r} matches {count} passes ({shown}); give more of the id")
 
     def get(self, pass_id: str) -> StoredPass:
-        """The stored pass with this id (a unique prefix is enough)."""
+        """The stored pass with this id (a unique prefix is enough), its content verified.
+
+        Raises
+        ------
+        UnknownPassError
+        DamagedObjectError
+            When the pass's object file, or the pass itself, fails its checksums.
+        """
         row = self.summary(pass_id)
         return self._read_passes(row.norad, {row.pass_id})[0]
 
+    def results(self, pass_id: str) -> list[ResultSummary]:
+        """Summaries (period, verdict, when) of every result stored for a pass."""
+        row = self.summary(pass_id)
+        return self._index.results(row.pass_id)
+
+    def duplicate_sources(self, pass_id: str):
+        """Files recorded as duplicate sources of a pass (`rsodb.archive.stored.DuplicateSource`)."""
+        row = self.summary(pass_id)
+        return self._index.duplicates(row.pass_id)
+
     def objects(self) -> list[ArchivedObject]:
-        """The archive's objects, by NORAD number."""
-        result = []
-        for norad in self._object_norads():
-            try:
-                rows, attrs = self._object_catalog(norad)
-            except FileNotFoundError:
-                continue
-            current = [row for row in rows if row.is_current]
-            if not current:
-                continue
-            result.append(
-                ArchivedObject(
-                    norad=norad,
-                    name=str(attrs.get("name", "")),
-                    cospar=str(attrs.get("cospar", "")),
-                    n_passes=len(current),
-                    n_versions=len(rows),
-                    bands=tuple(sorted({row.band for row in current})),
-                    first_utc=min(row.start_utc for row in current),
-                    last_utc=max(row.start_utc for row in current),
-                )
+        """The archive's objects with current passes, by NORAD number."""
+        self._refresh()
+        return [
+            ArchivedObject(
+                norad=norad,
+                name=name or "",
+                cospar=cospar or "",
+                n_passes=n_passes,
+                n_versions=n_versions,
+                bands=tuple(sorted(set((bands or "").split(",")) - {""})),
+                first_utc=np.datetime64(first, "ns"),
+                last_utc=np.datetime64(last, "ns"),
             )
-        return result
+            for norad, name, cospar, n_passes, bands, first, last, n_versions in self._index.objects()
+        ]
 
     # -- writing -----------------------------------------------------------------------------
     def ingest(
@@ -298,6 +470,8 @@ class Archive:
         workers: int | None = None,
         on_commit: Callable[[CommitEvent], None] | None = None,
         commit_interval_s: float = 1.0,
+        elements: ElementCatalogue | str | os.PathLike | None = None,
+        max_age_days: float = DEFAULT_MAX_AGE_DAYS,
     ) -> IngestReport:
         """Read observation files and store their passes.
 
@@ -305,27 +479,33 @@ class Archive:
         ----------
         paths : str, path-like, or iterable of them
             Files (read whatever their name) and directories (walked recursively for
-            ``*.ph<letter>`` files; see `rsodb.archive.discovery`).
+            observation files; see `rsodb.archive.discovery`).
         progress : bool
             Show a progress bar on stderr.
         workers : int, optional
-            Reader processes; 0 reads in this process. Default: one per CPU for large batches.
+            Reader processes; 0 reads in this process. Default: one per CPU for large batches;
+            more than the usable cores are not started.
         on_commit : callable, optional
             Called with a `CommitEvent` each time an object file has been replaced: from then on
             the passes it lists survive any crash.
         commit_interval_s : float
-            Commit at least this often while files are being read (the cost of a commit grows
-            with the object's size, so commits are also spaced to keep their share of the time
-            bounded; see docs/archive.md).
+            Commit at least this often while files are being read (see docs/archive.md).
+        elements : ElementCatalogue or path, optional
+            A TLE or OMM catalogue: passes whose files carry no elements get the set of their
+            object nearest the pass, if it is at most `max_age_days` away.
+        max_age_days : float
+            The oldest element set given to a pass (days between epoch and pass).
 
         Returns
         -------
         IngestReport
-            Ingested, already present (same SHA-256), and failed files with their reasons.
+            Ingested, duplicate, already present (same SHA-256) and failed files, and warnings.
             A bad file never stops the batch.
         """
         if isinstance(paths, (str, os.PathLike)):
             paths = [paths]
+        if elements is not None and not isinstance(elements, ElementCatalogue):
+            elements = ElementCatalogue.from_file(elements)
         return run_ingest(
             self,
             list(paths),
@@ -333,6 +513,8 @@ class Archive:
             workers=workers,
             on_commit=on_commit,
             commit_interval_s=commit_interval_s,
+            elements=elements,
+            max_age_days=max_age_days,
         )
 
     def add(self, passes: Iterable[Pass]) -> IngestReport:
@@ -345,100 +527,67 @@ class Archive:
         for pass_ in passes:
             if not isinstance(pass_, Pass):
                 raise TypeError(f"archive.add takes Pass objects, got {type(pass_).__name__}")
-            sha = pass_.source_sha256 or layout.content_sha256(pass_)
+            sha = pass_.source_sha256 or layout.memory_sha256(pass_)
             by_object.setdefault(int(pass_.norad), {}).setdefault(sha, []).append(pass_)
-        ingested, present = [], []
-        for norad, by_sha in sorted(by_object.items()):
-            pending = [
+        batches = {
+            norad: [
                 PendingFile(group[0].source_name or f"<pass {group[0].norad}>", sha, tuple(group))
                 for sha, group in by_sha.items()
             ]
-            event = self.commit(norad, pending)
-            ingested.extend(event.ingested)
-            present.extend(event.already_present)
-        return IngestReport(ingested=tuple(ingested), already_present=tuple(present))
+            for norad, by_sha in by_object.items()
+        }
+        events, failures = self.commit_many(batches)
+        if failures:
+            raise failures[0][1]
+        return IngestReport(
+            ingested=tuple(item for event in events for item in event.ingested),
+            already_present=tuple(item for event in events for item in event.already_present),
+            duplicates=tuple(item for event in events for item in event.duplicates),
+        )
 
     def commit(self, norad: int, files: Sequence[PendingFile]) -> CommitEvent:
         """Store the passes of `files` (all of object `norad`) in one atomic replacement.
 
         Under the object's lock: files whose SHA-256 is already stored are skipped; each new pass
-        gets its id and version (a changed file for a stored pass becomes a new version of it);
-        then the object file is replaced. Returns once the replacement is durable.
+        is placed by the version rule (docs/archive.md); then the object file is replaced.
+        Returns once the replacement is durable.
         """
-        norad = int(norad)
-        with self._lock(norad):
-            final = self.object_path(norad)
-            self._remove_own_temp_files(norad)
-            rows, attrs = self._read_for_update(final)
-            known = {row.source_sha256 for row in rows}
-            now = _utc_now()
-            ingested, present, to_write = [], [], []
-            for pending in files:
-                if pending.sha256 in known:
-                    present.append(pending.path)
+        events, failures = self.commit_many({int(norad): list(files)})
+        if failures:
+            raise failures[0][1]
+        return events[0]
+
+    def commit_many(
+        self, batches: dict[int, Sequence[PendingFile]]
+    ) -> tuple[list[CommitEvent], list[tuple[int, Exception]]]:
+        """Commit the files of many objects in one round: each object is replaced atomically,
+        and the round pays for one flush of the file system instead of one per object.
+
+        Returns
+        -------
+        events : list of CommitEvent
+            Per object committed (or found to need nothing), once durable.
+        failures : list of (norad, exception)
+            Objects whose commit failed (a damaged object file, a lock held too long); the
+            others are committed regardless.
+        """
+        events, failures = [], []
+        with self._transaction() as transaction:
+            for norad in sorted(batches):
+                try:
+                    transaction.lock(norad)
+                    event = stage_files(transaction, norad, batches[norad])
+                except (DamagedObjectError, layout.DamagedPassError, TimeoutError, OSError, ValueError) as exc:
+                    if isinstance(exc, layout.DamagedPassError):
+                        exc = DamagedObjectError(self.object_path(norad), str(exc))
+                    failures.append((norad, exc))
                     continue
-                known.add(pending.sha256)
-                ids, superseded = [], []
-                for pass_ in pending.passes:
-                    if int(pass_.norad) != norad:
-                        raise ValueError(f"{pending.path}: pass of NORAD {pass_.norad} committed to object {norad}")
-                    if pass_.source_sha256 != pending.sha256:
-                        pass_ = pass_.replace(source_sha256=pending.sha256)
-                    metadata, rows = _identify(pass_, rows, now)
-                    ids.append(metadata["pass_id"])
-                    if metadata["supersedes"]:
-                        superseded.append(metadata["supersedes"])
-                    to_write.append((pass_, metadata))
-                ingested.append(IngestedFile(pending.path, tuple(ids), tuple(superseded)))
-            if to_write:
-                rows.sort(key=lambda row: (row.start_utc, row.pass_id))
-                latest = to_write[-1][0]
-                with self._next_version(final, attrs, norad) as file:
-                    passes_group = file.require_group("passes")
-                    for pass_, metadata in to_write:
-                        layout.write_pass(passes_group, pass_, metadata)
-                    freed = int(file.attrs.get("freed_bytes", 0)) + _catalog_bytes(file)
-                    layout.write_catalog(file, rows)
-                    file.attrs["freed_bytes"] = freed
-                    file.attrs["updated_utc"] = now
-                    # Attributes cost ~0.1 ms each: write the object's name only when it changes.
-                    for key, value in (("name", latest.name), ("cospar", latest.cospar)):
-                        if value and attrs.get(key) != value:
-                            file.attrs[key] = value
-        return CommitEvent(norad=norad, ingested=tuple(ingested), already_present=tuple(present))
-
-    def _remove_own_temp_files(self, norad: int) -> None:
-        for path in stale_temp_files(self.objects_dir, layout.object_file_name(norad)):
-            path.unlink(missing_ok=True)
-
-    @staticmethod
-    def _read_for_update(final: Path) -> tuple[list[PassSummary], dict]:
-        if not final.exists():  # under the lock: nobody creates it meanwhile
-            return [], {}
-        with _open_object(final) as file:
-            return layout.read_catalog(file), {name: file.attrs[name] for name in file.attrs}
-
-    @contextmanager
-    def _next_version(self, final: Path, attrs: dict, norad: int) -> Iterator[h5py.File]:
-        """Yield the object's next file, open for writing; it becomes the current file on a clean exit.
-
-        The next file starts as a byte copy of the current one (cheap: the kernel copies it), or as
-        a repacked copy once replaced catalogs and results have left too much dead space behind.
-        """
-        with replacing(final, durable=self.durable) as tmp:
-            if not final.exists():
-                file = h5py.File(tmp, "w")
-                layout.write_file_attributes(file, norad)
-                file.create_group("passes")
-            elif int(attrs.get("freed_bytes", 0)) > max(_REPACK_MIN_BYTES, _REPACK_FRACTION * final.stat().st_size):
-                file = _repacked(final, tmp)
-            else:
-                shutil.copyfile(final, tmp)
-                file = h5py.File(tmp, "r+")
-            try:
-                yield file
-            finally:
-                file.close()
+                if not any(item.norad == norad for item in transaction.staged):
+                    events.append(event)
+            for staged in transaction.publish():
+                events.append(staged.event)
+        events.sort(key=lambda event: event.norad)
+        return events, failures
 
     # -- results -----------------------------------------------------------------------------
     @staticmethod
@@ -470,7 +619,8 @@ class Archive:
         """Store many results with one atomic commit per object (see `store_result`).
 
         Every commit rewrites the object's file, so storing the results of a survey one by one
-        costs a file copy each; this writes all of an object's results in one.
+        costs a file copy each; this writes all of an object's results in one, and publishes
+        all objects with one flush.
 
         Parameters
         ----------
@@ -487,58 +637,60 @@ class Archive:
         ------
         ValueError, TypeError, KeyError
             Before anything is written, for a bad kind, name, result or pass id. If a result's
-            ``to_hdf5`` raises, its object's commit is abandoned; objects committed before it
-            keep their results.
+            ``to_hdf5`` raises, nothing is stored.
         """
-        by_norad: dict[int, list[tuple[PassSummary, str, str, object]]] = {}
+        by_norad: dict[int, list[tuple[str, str, str, object]]] = {}
         for pass_id, kind, name, result in items:
             self._check_result_key(kind, name)
             if not callable(getattr(result, "to_hdf5", None)):
                 raise TypeError(f"{type(result).__name__} has no to_hdf5(group) method, so it cannot be stored")
             row = self.summary(pass_id)
-            by_norad.setdefault(row.norad, []).append((row, kind, name, result))
-        for norad, entries in by_norad.items():
-            final = self.object_path(norad)
-            with self._lock(norad):
-                self._remove_own_temp_files(norad)
-                _, attrs = self._read_for_update(final)
-                with self._next_version(final, attrs, norad) as file:
-                    now = _utc_now()
-                    for row, kind, name, result in entries:
-                        kind_group = file["passes"][row.pass_id].require_group(kind)
-                        if name in kind_group:
-                            file.attrs["freed_bytes"] = int(file.attrs.get("freed_bytes", 0)) + _storage_bytes(
-                                kind_group[name]
-                            )
-                            del kind_group[name]
-                        group = kind_group.create_group(name)
-                        group.attrs["stored_utc"] = now
-                        group.attrs["result_type"] = f"{type(result).__module__}.{type(result).__qualname__}"
-                        result.to_hdf5(group)
-                    file.attrs["updated_utc"] = now
+            by_norad.setdefault(row.norad, []).append((row.pass_id, kind, name, result))
+        with self._transaction() as transaction:
+            for norad in sorted(by_norad):
+                transaction.lock(norad)
+                stage_results(transaction, norad, by_norad[norad])
+            transaction.publish()
         return len(by_norad)
 
     def load_result(self, pass_id: str, kind: str, name: str, loader: Callable[[h5py.Group], object]):
-        """Return ``loader(group)`` for a stored result (the file is closed after `loader` returns)."""
+        """Return ``loader(group)`` for a stored result (the file is closed after `loader` returns).
+
+        Raises
+        ------
+        DamagedObjectError
+            When the result fails its SHA-256 (it is not handed to `loader`).
+        """
         self._check_result_key(kind, name)
         row = self.summary(pass_id)
-        with _open_object(self.object_path(row.norad)) as file:
-            pass_group = file["passes"][row.pass_id]
-            if kind not in pass_group or name not in pass_group[kind]:
+        path = self.object_path(row.norad)
+        with open_object(path) as file:
+            try:
+                pass_group = file["passes"][row.pass_id]
+                found = kind in pass_group and name in pass_group[kind]
                 stored = sorted(pass_group[kind]) if kind in pass_group else []
+                group = pass_group[kind][name] if found else None
+            except (KeyError, OSError, RuntimeError) as exc:
+                raise DamagedObjectError(
+                    path, f"pass {row.pass_id} cannot be read ({str(exc).splitlines()[0]})"
+                ) from None
+            if group is None:
                 raise UnknownPassError(
                     f"pass {row.pass_id!r} has no {kind} result named {name!r}; stored: "
                     f"{', '.join(stored) if stored else 'none'}"
                 )
-            return loader(pass_group[kind][name])
+            check_result(group, path)
+            return loader(group)
+
+    def result_values(self, pass_id: str, kind: str, name: str) -> dict:
+        """A stored result's scalar attributes and small tables, as plain values (what
+        ``rsodb show`` prints): numbers, text, and each small 1-D table as a list of rows."""
+        return self.load_result(pass_id, kind, name, _plain_values)
 
     def result_names(self, pass_id: str, kind: str) -> list[str]:
         """Names of the stored results of one kind for a pass, sorted."""
         self._check_result_key(kind, "x")
-        row = self.summary(pass_id)
-        with _open_object(self.object_path(row.norad)) as file:
-            pass_group = file["passes"][row.pass_id]
-            return sorted(pass_group[kind]) if kind in pass_group else []
+        return sorted(item.name for item in self.results(pass_id) if item.kind == kind)
 
     def chain_path(self, pass_id: str, name: str) -> Path:
         """Where an emcee HDFBackend for fit `name` of this pass lives (parent directory created).
@@ -552,122 +704,164 @@ class Archive:
         directory.mkdir(parents=True, exist_ok=True)
         return directory / f"{name}.h5"
 
+    # -- orbital elements ------------------------------------------------------------------
+    def add_elements(
+        self,
+        catalogue: ElementCatalogue | str | os.PathLike,
+        *,
+        max_age_days: float = DEFAULT_MAX_AGE_DAYS,
+        norad: int | None = None,
+        replace_catalogue: bool = False,
+    ) -> ElementsReport:
+        """Give stored passes without orbital elements the nearest set of a TLE/OMM catalogue.
 
-def _open_object(path: Path) -> h5py.File:
-    """Open an object file read-only, checking its schema; a damaged file is named in the error."""
-    try:
-        file = h5py.File(path, "r")
-    except FileNotFoundError:
-        raise
-    except OSError as exc:
-        raise OSError(
-            f"{path} cannot be read as HDF5 ({exc}); restore it from a backup or move it out of the archive"
-        ) from None
-    try:
-        layout.check_schema(file, path)
-    except ValueError:
-        file.close()
-        raise
-    return file
+        Parameters
+        ----------
+        catalogue : ElementCatalogue or path
+        max_age_days : float
+            The oldest set given (days between its epoch and the pass).
+        norad : int, optional
+            Only this object.
+        replace_catalogue : bool
+            Also replace elements that an earlier catalogue gave, where this one has a set nearer
+            the pass. Elements from a file's own header are never replaced (its Az/El columns were
+            computed with them).
+
+        Returns
+        -------
+        ElementsReport
+        """
+        if not isinstance(catalogue, ElementCatalogue):
+            catalogue = ElementCatalogue.from_file(catalogue)
+        candidates = [
+            row
+            for row in self.iter_summaries(norad, all_versions=True)
+            if row.elements == "" or (replace_catalogue and row.elements == "catalogue")
+        ]
+        changes: dict[int, dict] = {}
+        notes = []
+        for row in candidates:
+            chosen, reason = catalogue.elements_for(row.norad, row.start_utc, max_age_days)
+            if chosen is None:
+                notes.append((row.pass_id, reason))
+                continue
+            provenance = catalogue.provenance(chosen, row.start_utc)
+            provenance["added_utc"] = utc_now()
+            changes.setdefault(row.norad, {})[row.pass_id] = _elements_change(chosen, provenance)
+        changed: list[str] = []
+        failures = []
+        with self._transaction() as transaction:
+            for object_norad in sorted(changes):
+                try:
+                    transaction.lock(object_norad)
+                    changed += stage_metadata(transaction, object_norad, changes[object_norad])
+                except (DamagedObjectError, TimeoutError) as exc:
+                    failures.append((object_norad, exc))
+            transaction.publish()
+        return ElementsReport(tuple(changed), tuple(notes), tuple(failures), catalogue.name)
 
 
-def _repacked(source: Path, tmp: Path) -> h5py.File:
-    """A fresh copy of `source` at `tmp` holding only live objects (space of deleted ones dropped)."""
-    file = h5py.File(tmp, "w")
-    with h5py.File(source, "r") as old:
-        for name, value in old.attrs.items():
-            file.attrs[name] = value
-        for name in old:
-            old.copy(old[name], file, name=name)
-    file.attrs["freed_bytes"] = 0
-    return file
+def _elements_change(chosen, provenance: dict) -> Callable[[dict], dict | None]:
+    def change(metadata: dict) -> dict | None:
+        old = metadata.get("elements_source")
+        if metadata.get("tle") is not None or metadata.get("omm") is not None:
+            if not old:
+                return None  # the file's own elements
+            if abs(old.get("age_days", np.inf)) <= provenance["age_days"]:
+                return None  # the stored set is at least as near
+        metadata["tle"] = list(chosen.tle) if chosen.tle is not None else None
+        metadata["omm"] = dict(chosen.omm) if chosen.omm is not None else None
+        metadata["elements_source"] = provenance
+        metadata["warnings"] = [
+            item for item in metadata.get("warnings", []) if not item.get("reason", "").startswith("no orbit:")
+        ]
+        return metadata
+
+    return change
 
 
-def _storage_bytes(node) -> int:
-    """Bytes used by the datasets under an HDF5 group or dataset (an estimate of what deleting frees)."""
-    if isinstance(node, h5py.Dataset):
-        return int(node.id.get_storage_size())
-    total = 0
+class ElementsReport:
+    """What `Archive.add_elements` did.
 
-    def visit(_name, item):
-        nonlocal total
-        if isinstance(item, h5py.Dataset):
-            total += int(item.id.get_storage_size())
-
-    node.visititems(visit)
-    return total
-
-
-def _catalog_bytes(file: h5py.File) -> int:
-    """Space the current catalog will leave behind when it is replaced (table plus its strings)."""
-    if "catalog" not in file:
-        return 0
-    catalog = file["catalog"]
-    return int(catalog.id.get_storage_size()) + 16 * len(layout.CATALOG_DTYPE.names) * catalog.shape[0]
-
-
-def _identify(pass_: Pass, rows: list[PassSummary], now: str) -> tuple[dict, list[PassSummary]]:
-    """Id, version and metadata of a new pass, and the catalog rows with it added.
-
-    A new pass is another version of a stored one when both have the same band and site and
-    either the same natural id (object, start second, band, site) or the same file name with
-    overlapping times (a changed file). It then gets the next version number of that lineage and
-    supersedes its current version; otherwise it starts a lineage of its own.
+    Attributes
+    ----------
+    changed : tuple of str
+        Pass ids that got elements.
+    skipped : tuple of (pass_id, reason)
+        Passes left without: no set of their object, or the nearest too old.
+    failed : tuple of (norad, exception)
+        Objects whose files could not be updated.
+    catalogue : str
     """
-    natural = layout.natural_pass_id(pass_)
-    start, end = pass_.start_utc, pass_.end_utc
 
-    def same_pass(row: PassSummary) -> bool:
-        if row.natural_id == natural or row.lineage_id == natural:
-            return True  # same object, start second, band and site: the same observation
-        if row.band != pass_.band or row.site != pass_.site.name:
-            return False
-        return (
-            bool(pass_.source_name)
-            and row.source_name == pass_.source_name
-            and row.start_utc <= end
-            and start <= row.end_utc
-        )
+    def __init__(self, changed, skipped, failed, catalogue: str):
+        self.changed, self.skipped, self.failed, self.catalogue = changed, skipped, failed, catalogue
 
-    current = [row for row in rows if row.is_current and same_pass(row)]
-    # Prefer the lineage named by this pass's own start, then the most recently stored one.
-    current.sort(key=lambda row: (row.natural_id == natural or row.lineage_id == natural, row.ingested_utc))
-    if current:
-        previous = current[-1]
-        lineage = previous.lineage_id
-        version = 1 + max(row.version for row in rows if row.lineage_id == lineage)
-        supersedes = previous.pass_id
-    else:
-        lineage, version, supersedes = natural, 1, None
-    pass_id = layout.versioned_pass_id(lineage, version)
-    metadata = layout.pass_metadata(
-        pass_,
-        pass_id=pass_id,
-        lineage_id=lineage,
-        natural_id=natural,
-        version=version,
-        supersedes=supersedes,
-        ingested_utc=now,
-    )
-    new_row = PassSummary(
-        pass_id=pass_id,
-        lineage_id=lineage,
-        natural_id=natural,
-        version=version,
-        supersedes=supersedes,
-        superseded_by=None,
-        norad=int(pass_.norad),
-        name=pass_.name,
-        band=pass_.band,
-        site=pass_.site.name,
-        start_utc=start,
-        end_utc=end,
-        n_points=len(pass_),
-        exposure_s=float(pass_.exposure_s),
-        source_name=pass_.source_name,
-        source_sha256=pass_.source_sha256,
-        source_format=pass_.source_format,
-        ingested_utc=now,
-    )
-    updated = [replace(row, superseded_by=pass_id) if row.pass_id == supersedes else row for row in rows]
-    return metadata, updated + [new_row]
+    @property
+    def ok(self) -> bool:
+        return not self.failed
+
+    def summary(self) -> str:
+        lines = [
+            f"added elements from {self.catalogue} to {len(self.changed)} pass(es); "
+            f"{len(self.skipped)} left without; {len(self.failed)} object(s) failed"
+        ]
+        lines += [f"  {pass_id}: {reason}" for pass_id, reason in self.skipped]
+        lines += [f"  failed: {error}" for _, error in self.failed]
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict:
+        return {
+            "catalogue": self.catalogue,
+            "changed": list(self.changed),
+            "skipped": [{"pass_id": pass_id, "reason": reason} for pass_id, reason in self.skipped],
+            "failed": [{"norad": norad, "message": str(error)} for norad, error in self.failed],
+        }
+
+
+def _text(value) -> str:
+    return value.decode("utf-8") if isinstance(value, bytes) else str(value)
+
+
+def _as_datetime(value, name: str) -> np.datetime64:
+    """A UTC time from datetime64, ISO text or an astropy Time, as datetime64[ns]."""
+    if hasattr(value, "datetime64"):  # astropy Time
+        value = value.utc.datetime64
+    text = str(value).rstrip("Z") if isinstance(value, str) else value
+    try:
+        day = np.datetime64(text, "D")
+        result = np.datetime64(text, "ns")
+    except (ValueError, TypeError):
+        raise ValueError(f"{name}={value!r} is not a UTC time; give e.g. 2025-01-30 or 2025-01-30T17:00") from None
+    if np.isnat(result) or not np.datetime64("1678-01-01") <= day <= np.datetime64("2262-04-10"):
+        raise ValueError(f"{name}={value!r} is not a UTC time between 1678 and 2262; give e.g. 2025-01-30")
+    return result
+
+
+def _plain(value):
+    """An HDF5 attribute or table cell as a JSON-ready value (NaN as None, JSON text parsed)."""
+    if isinstance(value, bytes):
+        value = value.decode("utf-8", "replace")
+    if isinstance(value, np.ndarray):
+        return [_plain(item) for item in value.tolist()] if value.size <= 16 else f"<array of {value.size}>"
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    if isinstance(value, str) and value[:1] in "[{":
+        try:
+            return json.loads(value)
+        except ValueError:
+            return value
+    return value
+
+
+def _plain_values(group: h5py.Group) -> dict:
+    """Scalar attributes and small 1-D tables (up to 64 rows) of a result group."""
+    values = {key: _plain(group.attrs[key]) for key in sorted(group.attrs) if key != "content_sha256"}
+    for key in sorted(group):
+        node = group[key]
+        if isinstance(node, h5py.Dataset) and node.ndim == 1 and node.dtype.names and node.shape[0] <= 64:
+            rows = node[()]
+            values[key] = [{name: _plain(row[name]) for name in rows.dtype.names} for row in rows]
+    return values

@@ -8,7 +8,15 @@ import numpy as np
 
 from ingest.observation import Pass
 
-__all__ = ["StoredPass", "PassSummary", "ArchivedObject"]
+__all__ = [
+    "utc_text",
+    "StoredPass",
+    "PassSummary",
+    "ArchivedObject",
+    "ResultSummary",
+    "DuplicateSource",
+    "DamagedObject",
+]
 
 
 @dataclass(frozen=True, eq=False)
@@ -83,6 +91,16 @@ class PassSummary:
     exposure_s : float
     source_name, source_sha256, source_format : str
     ingested_utc : str
+    n_row_problems, n_warnings : int
+        Rows the reader set aside, and warnings about the file's header.
+    elements : str
+        Where the pass's orbital elements come from: ``"header"`` (the file), ``"catalogue"``
+        (added from a TLE/OMM catalogue) or ``""`` (none: no geometry, render or fit).
+    period_s, period_err_s : float or None
+        Spin period and its 1-sigma error from the stored period result the query named
+        (``periods_name``, default "default"); None without one.
+    verdict : str or None
+        That result's verdict.
     """
 
     pass_id: str
@@ -103,6 +121,12 @@ class PassSummary:
     source_sha256: str
     source_format: str
     ingested_utc: str
+    n_row_problems: int = 0
+    n_warnings: int = 0
+    elements: str = ""
+    period_s: float | None = None
+    period_err_s: float | None = None
+    verdict: str | None = None
 
     @property
     def duration_s(self) -> float:
@@ -135,7 +159,75 @@ class PassSummary:
             "source_sha256": self.source_sha256,
             "source_format": self.source_format,
             "ingested_utc": self.ingested_utc,
+            "n_row_problems": self.n_row_problems,
+            "n_warnings": self.n_warnings,
+            "elements": self.elements,
+            "period_s": self.period_s,
+            "period_err_s": self.period_err_s,
+            "verdict": self.verdict,
         }
+
+
+@dataclass(frozen=True)
+class ResultSummary:
+    """One stored result as the catalog keeps it.
+
+    Attributes
+    ----------
+    pass_id, kind, name : str
+        Where it is stored: ``/passes/<pass_id>/<kind>/<name>``.
+    stored_utc, result_type : str
+    period_s, period_err_s : float or None
+        The spin period it found (a period search's best period, a fit's spin period median).
+    verdict : str or None
+    """
+
+    pass_id: str
+    kind: str
+    name: str
+    stored_utc: str = ""
+    result_type: str = ""
+    period_s: float | None = None
+    period_err_s: float | None = None
+    verdict: str | None = None
+
+
+@dataclass(frozen=True)
+class DuplicateSource:
+    """A file whose rows were all in a stored pass already, recorded instead of stored again.
+
+    Attributes
+    ----------
+    sha256, source_name : str
+        The file.
+    pass_id : str
+        The stored pass that holds its rows.
+    ingested_utc : str
+    note : str
+        What differed (a header that disagrees with the stored pass), or "".
+    """
+
+    sha256: str
+    source_name: str
+    pass_id: str
+    ingested_utc: str
+    note: str = ""
+
+
+@dataclass(frozen=True)
+class DamagedObject:
+    """An object file that cannot be read: its passes are left out of listings until repaired.
+
+    Attributes
+    ----------
+    norad : int
+    path : str
+    reason : str
+    """
+
+    norad: int
+    path: str
+    reason: str
 
 
 @dataclass(frozen=True)
@@ -166,5 +258,19 @@ class ArchivedObject:
     last_utc: np.datetime64
 
 
+def utc_text(t: np.datetime64, unit: str = "ms") -> str:
+    """ISO text of a UTC time, rounded to the millisecond first and then cut to `unit`.
+
+    The rounding is that of pass ids (`rsodb.archive.layout.natural_pass_id`): a Julian date
+    stored as a float64 holds 01:07:14.000 as 01:07:13.9999952, which every display shows as
+    01:07:14, never as the second before.
+
+    >>> utc_text(np.datetime64("2021-06-26T01:07:13.9999952"), "s")
+    '2021-06-26T01:07:14'
+    """
+    rounded = (np.datetime64(t, "ns") + np.timedelta64(500_000, "ns")).astype("datetime64[ms]")
+    return np.datetime_as_string(rounded, unit=unit)
+
+
 def _iso(t: np.datetime64) -> str:
-    return np.datetime_as_string(t, unit="ms") + "Z"
+    return utc_text(t) + "Z"

@@ -27,7 +27,13 @@ from rsodb.fit.config import FitConfig
 from rsodb.fit.runner import fit_pass
 from rsodb.pool import default_processes
 
-__all__ = ["CampaignOutcome", "run_campaign", "run_campaigns", "select_passes"]
+__all__ = ["CampaignOutcome", "run_campaign", "run_campaigns", "select_passes", "NO_ORBIT"]
+
+# Why a pass without orbital elements is not fitted (CampaignOutcome.failed, the reports' index).
+NO_ORBIT = (
+    "no orbital elements, so no pass geometry to fit: add them with 'rsodb elements add TLE_FILE' "
+    "(or ingest the file with --tle TLE_FILE)"
+)
 
 
 @dataclass(frozen=True)
@@ -64,7 +70,8 @@ class CampaignOutcome:
         """One line of counts."""
         return (
             f"fit {self.name!r}: {len(self.fitted)} fitted, {len(self.skipped)} already done (skipped), "
-            f"{len(self.failed)} failed in {self.elapsed_s:.0f} s on {self.scheduler}"
+            f"{len(self.failed)} not fitted (failed, or no orbital elements) in {self.elapsed_s:.0f} s on "
+            f"{self.scheduler}"
         )
 
     def to_dict(self) -> dict:
@@ -84,7 +91,7 @@ def select_passes(archive, norad: int | None = None, pass_ids=None, band: str | 
         return [archive.get(pass_id).pass_id for pass_id in pass_ids]
     if norad is None:
         raise ValueError("a campaign needs an object (--object NORAD) or a list of passes")
-    return [row.pass_id for row in archive.catalog(norad, band)]
+    return [row.pass_id for row in archive.summaries(norad, band)]
 
 
 def _fit_task(archive_path: str, pass_id: str, config_record: dict) -> dict:
@@ -107,7 +114,9 @@ def _client(scheduler: str | None, n_workers: int | None):
         n_workers=n_workers or default_processes(),
         threads_per_worker=1,
         processes=True,
-        dashboard_address=None,
+        # A random free port: None does not disable the dashboard (dask/distributed#8136) and
+        # warns whenever another cluster holds the default 8787.
+        dashboard_address=":0",
         silence_logs=40,
     )
     return Client(cluster), cluster
@@ -179,39 +188,45 @@ def run_campaigns(
     in the order given.
     """
     archive = _open(archive)
-    plans = []  # (config, passes to fit, passes already fitted)
+    plans = []  # (config, passes to fit, passes already fitted, passes that cannot be fitted)
     for config, pass_ids in groups:
         config = config.replace(sampler={"processes": 1})
         done = [] if restart else [p for p in pass_ids if config.name in archive.result_names(p, "fits")]
-        todo = [p for p in pass_ids if p not in done]
+        # A pass without orbital elements has no geometry: said here, in one line, rather than
+        # as a task failing on a worker (whose traceback Dask prints in the client's terminal).
+        unfit = [(p, NO_ORBIT) for p in pass_ids if p not in done and not archive.summary(p).elements]
+        todo = [p for p in pass_ids if p not in done and p not in dict(unfit)]
         if restart:
             for pass_id in todo:
                 path = archive.chain_path(pass_id, config.name)
                 path.unlink(missing_ok=True)
                 path.with_name(path.name + ".bak").unlink(missing_ok=True)
-        plans.append((config, todo, done))
+        plans.append((config, todo, done, unfit))
     started = time.perf_counter()
-    if not any(todo for _, todo, _ in plans):
-        return [CampaignOutcome(config.name, (), tuple(done), (), 0.0, "nothing to run") for config, _, done in plans]
+    if not any(todo for _, todo, _, _ in plans):
+        return [
+            CampaignOutcome(config.name, (), tuple(done), tuple(unfit), 0.0, "nothing to run")
+            for config, _, done, unfit in plans
+        ]
     # Dask's distributed loads in about a second; only campaigns need it.
     from distributed import as_completed
 
     client, cluster = _client(scheduler, n_workers)
     fitted = [[] for _ in plans]
-    failed = [[] for _ in plans]
+    failed = [list(unfit) for _, _, _, unfit in plans]
     finished = [0.0] * len(plans)
     try:
         address = client.scheduler.address
         archive_path = str(Path(archive.path).resolve())
         futures = {}
-        for number, (config, todo, _) in enumerate(plans):
+        for number, (config, todo, _, _) in enumerate(plans):
             record = config.to_dict()
             for pass_id in todo:
                 future = client.submit(
                     _fit_task, archive_path, pass_id, record, key=f"fit-{config.name}-{number}-{pass_id}", pure=False
                 )
                 futures[future] = (number, pass_id)
-        names = sorted({config.name for config, _, _ in plans})
+        names = sorted({config.name for config, _, _, _ in plans})
         with tqdm(total=len(futures), desc=f"campaign {', '.join(names)}", unit="pass", disable=not progress) as bar:
             for future in as_completed(futures):
                 number, pass_id = futures[future]
@@ -227,7 +242,7 @@ def run_campaigns(
         if cluster is not None:
             cluster.close()
     outcomes = []
-    for (config, _, done), results, errors, elapsed in zip(plans, fitted, failed, finished):
+    for (config, _, done, _), results, errors, elapsed in zip(plans, fitted, failed, finished):
         results.sort(key=lambda r: r["start_utc"])
         outcomes.append(CampaignOutcome(config.name, tuple(results), tuple(done), tuple(errors), elapsed, address))
     return outcomes

@@ -117,7 +117,7 @@ def survey_periods(
     PeriodSurvey
     """
     settings = settings or PeriodSettings()
-    rows = archive.catalog(norad, band)
+    rows = archive.summaries(norad, band)
     tasks = [(str(archive.path), row.pass_id, settings.to_dict(), geometry) for row in rows]
     results, failures, unstored = [], [], []
     last_store_s = time.monotonic()
@@ -150,7 +150,7 @@ def load_period_results(
 ) -> list[PeriodResult]:
     """The stored period results of an archive's passes (passes without one are skipped), by start time."""
     results = []
-    for row in archive.catalog(norad, band):
+    for row in archive.summaries(norad, band):
         if name in archive.result_names(row.pass_id, "periods"):
             results.append(archive.load_result(row.pass_id, "periods", name, PeriodResult.from_hdf5))
     return results

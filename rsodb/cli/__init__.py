@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 __all__ = ["main", "COMMAND_MODULES"]
@@ -19,6 +20,8 @@ COMMAND_MODULES = [
     "ls",
     "show",
     "export",
+    "check",
+    "elements",
     "periods",
     "render",
     "report",
@@ -48,10 +51,17 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
-        return int(args.func(args) or 0)
+        status = int(args.func(args) or 0)
+        sys.stdout.flush()
+        return status
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        # The reader of our output stopped early (``rsodb ls | head``): not an error of ours.
+        # Point stdout at /dev/null so that the interpreter's final flush cannot fail again.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141  # 128 + SIGPIPE, what a shell reports for a command that a closed pipe stopped
 
 
 if __name__ == "__main__":

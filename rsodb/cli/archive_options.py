@@ -1,25 +1,86 @@
-"""The ``--archive DIR`` option and error reporting shared by the archive commands."""
+"""The ``--archive DIR`` option and error reporting shared by the archive commands.
+
+Without ``--archive`` a command uses ``$RSODB_ARCHIVE`` when it is set, else ``./archive``.
+"""
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
+import ingest
 import rsodb
 
-__all__ = ["add_archive_option", "open_archive", "fail"]
+__all__ = [
+    "add_archive_option",
+    "add_max_age_option",
+    "max_age_days",
+    "open_archive",
+    "archive_location",
+    "fail",
+    "ARCHIVE_ENV",
+    "DEFAULT_ARCHIVE",
+]
+
+ARCHIVE_ENV = "RSODB_ARCHIVE"
+DEFAULT_ARCHIVE = "archive"
 
 
 def add_archive_option(parser: argparse.ArgumentParser) -> None:
-    """Add the required ``--archive DIR`` option."""
+    """Add the ``--archive DIR`` option (default: ``$RSODB_ARCHIVE``, else ``./archive``)."""
     parser.add_argument(
-        "--archive", required=True, metavar="DIR", help="archive directory (created by 'rsodb ingest' when missing)"
+        "--archive",
+        default=None,
+        metavar="DIR",
+        help=f"archive directory (default: ${ARCHIVE_ENV} if set, else ./{DEFAULT_ARCHIVE}; "
+        "created by 'rsodb ingest' when missing)",
     )
 
 
+def add_max_age_option(parser: argparse.ArgumentParser) -> None:
+    """Add ``--max-age-days D``: the oldest element set a catalogue may give a pass."""
+    parser.add_argument(
+        "--max-age-days",
+        type=float,
+        default=None,
+        metavar="D",
+        help="oldest element set given to a pass, days between its epoch and the pass (default: 30)",
+    )
+
+
+def max_age_days(args: argparse.Namespace) -> float:
+    """``--max-age-days``, or the library's default (`ingest.elements.DEFAULT_MAX_AGE_DAYS`)."""
+    return ingest.DEFAULT_MAX_AGE_DAYS if args.max_age_days is None else args.max_age_days
+
+
+def archive_location(args: argparse.Namespace) -> tuple[str, str]:
+    """The archive directory the command uses, and where that choice came from."""
+    if getattr(args, "archive", None):
+        return args.archive, "--archive"
+    if os.environ.get(ARCHIVE_ENV):
+        return os.environ[ARCHIVE_ENV], f"${ARCHIVE_ENV}"
+    return DEFAULT_ARCHIVE, "the default"
+
+
 def open_archive(args: argparse.Namespace, create: bool = False):
-    """Open ``args.archive`` (raises ValueError with a one-sentence message when it is not usable)."""
-    return rsodb.Archive(args.archive, create=create)
+    """Open the archive (``args.archive`` is set to the directory used).
+
+    Raises
+    ------
+    ValueError
+        One sentence when it is not usable; a missing default archive says how to choose one.
+    """
+    path, source = archive_location(args)
+    args.archive = path
+    try:
+        return rsodb.Archive(path, create=create)
+    except ValueError as error:
+        if source == "--archive":
+            raise
+        raise ValueError(
+            f"{error} (the archive directory {path!r} comes from {source}; give --archive DIR or set {ARCHIVE_ENV})"
+        ) from None
 
 
 def fail(command: str, error: Exception, status: int = 2) -> int:

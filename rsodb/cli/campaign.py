@@ -7,20 +7,23 @@ import json
 
 import rsodb
 from rsodb.cli.archive_options import add_archive_option, fail, open_archive
+from rsodb.cli.fit import add_fit_options, config_from_args
 
 __all__ = ["register", "run"]
 
 EXAMPLE = """\
 examples:
   rsodb campaign --archive archive --object 22076
-  rsodb campaign --archive archive --object 22076 --config fit.toml --report topex_fits.html
+  rsodb campaign --archive archive --object 22076 --config configs/short.toml --report topex_fits.html
+  rsodb campaign --archive archive --object 40358 --model cosmos.obj --materials cosmos.materials.json --spin-axis x
   rsodb campaign --archive archive --passes 22076-20240730T212240 22076-20240802T203011
   rsodb campaign --archive /shared/archive --object 22076 --scheduler tcp://head-node:8786
 
 By default the passes are fitted on a Dask LocalCluster with one single-threaded worker per
 core. With --scheduler the tasks go to a running Dask cluster; the archive directory must then
 be visible to every worker at the same path. Passes that already have a fit of this name are
-skipped, so a rerun only does what is left; --restart refits them all.
+skipped, so a rerun only does what is left; --restart refits them all. A mesh's shape cache is
+built by the first task and read by the others from the archive (shapes/).
 """
 
 
@@ -38,9 +41,7 @@ def register(subparsers) -> None:
     parser.add_argument("--object", type=int, metavar="NORAD", help="fit every pass of this object")
     parser.add_argument("--passes", nargs="+", metavar="PASS", help="fit only these passes (ids or prefixes)")
     parser.add_argument("--band", help="only passes in this band")
-    parser.add_argument("--config", metavar="FIT.toml", help="fit configuration (default: the standard fit)")
-    parser.add_argument("--name", help="stored fit name (default: the configuration's)")
-    parser.add_argument("--steps", type=int, metavar="N", help="MCMC steps per walker (overrides the configuration)")
+    add_fit_options(parser)
     parser.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler address (default: a LocalCluster)")
     parser.add_argument("--workers", type=int, metavar="N", help="LocalCluster workers (default: one per core)")
     parser.add_argument("--restart", action="store_true", help="refit passes that already have this fit")
@@ -53,13 +54,7 @@ def register(subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     try:
         archive = open_archive(args)
-        config = rsodb.FitConfig.from_toml(args.config) if args.config else rsodb.FitConfig()
-        changes = {}
-        if args.steps is not None:
-            changes["sampler"] = {"n_steps": args.steps}
-        if args.name:
-            changes["name"] = args.name
-        config = config.replace(**changes) if changes else config
+        config = config_from_args(args)
         if args.workers is not None and args.workers < 1:
             raise ValueError(f"--workers {args.workers} must be at least 1")
         outcome = rsodb.campaign.run_campaign(
@@ -91,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
             )
             print(f"{record['pass_id']:40s} {text:36s} {'converged' if record['converged'] else 'NOT converged'}")
         for pass_id, error in outcome.failed:
-            print(f"{pass_id:40s} failed: {error}")
+            print(f"{pass_id:40s} not fitted: {error}")
         print(outcome.summary())
         if report_path:
             print(f"wrote {report_path}")

@@ -1,12 +1,12 @@
-"""``rsodb export PASS --archive DIR --format csv|eossa``: a pass as CSV or EOSSA FITS."""
+"""``rsodb export PASS --archive DIR [--format csv|eossa]``: a pass as CSV or EOSSA FITS."""
 
 from __future__ import annotations
 
 import argparse
-import os
 from pathlib import Path
 import sys
 
+import ingest
 import rsodb
 from rsodb.cli.archive_options import add_archive_option, fail, open_archive
 
@@ -17,8 +17,11 @@ example:
   rsodb export 22076-20240730T212240 --archive archive --format csv --out topex.csv
   rsodb export 22076-20240730T212240 --archive archive --format eossa --out topex.fits
 
-csv: one row per sample (UTC mid-exposure time in ISO 8601, magnitudes, fluxes, Az/El, range,
-flags); written to standard output without --out.
+csv: a '# key = value' header (object, band, exposure, site, conventions, elements) and one row
+per sample: time_utc (ISO 8601, UTC mid-exposure), mag_file (as the file wrote it),
+mag_corrected (only when the file had the extinction sign error: the magnitude to use), mag_err,
+flux, flux_err, az_deg, el_deg, range_km, saturated, valid; written to standard output without
+--out. 'rsodb ingest' reads it back (as a duplicate source of the pass it came from).
 eossa: the SSA community's FITS photometry exchange format, v3.1.1; --out defaults to
 PASS_ID.eossa.fits in the current directory.
 """
@@ -36,7 +39,7 @@ def register(subparsers) -> None:
     )
     parser.add_argument("pass_id", metavar="PASS", help="pass id (or a unique prefix)")
     add_archive_option(parser)
-    parser.add_argument("--format", required=True, choices=FORMATS, help="output format")
+    parser.add_argument("--format", default="csv", choices=FORMATS, help="output format (default: %(default)s)")
     parser.add_argument("--out", metavar="FILE", help="output file (csv: default standard output)")
     parser.add_argument("--force", action="store_true", help="overwrite an existing output file")
     parser.set_defaults(func=run)
@@ -46,28 +49,18 @@ def run(args: argparse.Namespace) -> int:
     try:
         stored = open_archive(args).get(args.pass_id)
         if args.format == "csv":
-            frame = stored.to_pandas()
-            frame.index = frame.index.strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+            notes = {"pass_id": stored.pass_id}
             if args.out is None:
-                return _to_stdout(frame)
+                ingest.write_csv(stored, sys.stdout, notes)
+                return 0
             out = _free_path(args.out, args.force)
-            frame.to_csv(out)
+            ingest.write_csv(stored, out, notes)
         else:
             out = _free_path(args.out or f"{stored.pass_id}.eossa.fits", args.force)
             rsodb.write_eossa(stored, out, overwrite=args.force)
     except (ValueError, LookupError, OSError) as error:
         return fail("export", error)
     print(f"wrote {out} ({len(stored)} samples of {stored.pass_id})", file=sys.stderr)
-    return 0
-
-
-def _to_stdout(frame) -> int:
-    try:
-        frame.to_csv(sys.stdout)
-        sys.stdout.flush()
-    except BrokenPipeError:
-        # The reader stopped early (``| head``): not an error. Silence the final flush.
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
     return 0
 
 

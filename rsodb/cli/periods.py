@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 
 import rsodb
 from rsodb.cli.archive_options import add_archive_option, fail, open_archive
@@ -17,8 +18,9 @@ examples:
   rsodb periods --archive archive --object 22076 --min-cycles 2 --name relaxed
 
 Each pass gets a period with a 1-sigma error and a verdict: confident, ambiguous harmonic,
-too short (fewer than ~3 cycles in the pass) or no signal. Results are stored in the archive
-under --name and feed 'rsodb report periods' and the spin-period prior of fits.
+aliased, non-periodic, single glint, too short (fewer than 3 cycles in the pass) or no signal
+(docs/periods.md). Results are stored in the archive under --name and feed 'rsodb report
+periods' and the spin-period prior of fits (confident and ambiguous harmonic only).
 """
 
 
@@ -47,17 +49,28 @@ def register(subparsers) -> None:
     parser.set_defaults(func=run)
 
 
+_COLUMNS = ("pass", "period s", "+- s", "cycles", "verdict", "sidereal s")
+_FORMAT = "{:40s} {:>11s} {:>9s} {:>7s}  {:18s} {}"
+
+
+def _header() -> str:
+    return _FORMAT.format(*_COLUMNS).rstrip() + "\n" + "-" * 100
+
+
 def _row(result) -> str:
-    period = (
-        "-"
-        if not math.isfinite(result.best_period_s)
-        else f"{result.best_period_s:10.4f} +- {result.uncertainty_s:.4f}"
-    )
-    sidereal = ""
+    named = math.isfinite(result.best_period_s)
+    sidereal = "-"
     if result.synodic is not None:
         low, high = sorted(result.sidereal_bounds_s)
-        sidereal = f"  sidereal {low:.4f}..{high:.4f}"
-    return f"{result.pass_id:40s} {period:>22s}  {result.verdict:18s}{sidereal}"
+        sidereal = f"{low:.4f}..{high:.4f}"
+    return _FORMAT.format(
+        result.pass_id,
+        f"{result.best_period_s:.4f}" if named else "-",
+        f"{result.uncertainty_s:.4f}" if named and math.isfinite(result.uncertainty_s) else "-",
+        f"{result.n_cycles:.1f}" if math.isfinite(result.n_cycles) else "-",
+        result.verdict,
+        sidereal,
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -79,6 +92,7 @@ def run(args: argparse.Namespace) -> int:
             store=not args.no_store,
             geometry=not args.no_geometry,
         )
+        damaged = archive.damaged(args.object)
     except (ValueError, TypeError, OSError) as error:
         return fail("periods", error)
     if args.json:
@@ -86,10 +100,18 @@ def run(args: argparse.Namespace) -> int:
     else:
         if not survey.results and not survey.failures:
             print(f"no passes in {args.archive}" + (f" for object {args.object}" if args.object else ""))
+        else:
+            print(_header())
         for result in survey.results:
             print(_row(result))
         for pass_id, error in survey.failures:
             print(f"{pass_id:40s} failed: {error}")
         if survey.stored_as:
             print(f"stored {len(survey.results)} result(s) as '{survey.stored_as}'")
-    return 0 if survey.ok else 1
+    for item in damaged:
+        print(
+            f"rsodb periods: warning: {item.path} is damaged ({item.reason}); its passes were not searched. "
+            f"Run 'rsodb check --archive {args.archive} --repair'",
+            file=sys.stderr,
+        )
+    return 0 if survey.ok and not damaged else 1

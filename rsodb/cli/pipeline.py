@@ -12,7 +12,7 @@ from pathlib import Path
 import sys
 
 import rsodb
-from rsodb.cli.archive_options import fail
+from rsodb.cli.archive_options import add_archive_option, archive_location, fail
 
 __all__ = ["register", "run"]
 
@@ -40,7 +40,7 @@ def register(subparsers) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("data_dir", metavar="DATA_DIR", help="directory (or file) of observation files")
-    parser.add_argument("--archive", required=True, metavar="DIR", help="archive directory (created when missing)")
+    add_archive_option(parser)
     parser.add_argument("--out", required=True, metavar="REPORTS_DIR", help="where the HTML reports go")
     parser.add_argument("--fit-config", metavar="FIT.toml", help="fit configuration instead of the short first look")
     parser.add_argument("--fit-name", help="stored fit name (default: 'quick', or the configuration's)")
@@ -59,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
         config = rsodb.fit.FitConfig.from_toml(args.fit_config) if args.fit_config else None
         summary = rsodb.pipeline.run_pipeline(
             args.data_dir,
-            args.archive,
+            archive_location(args)[0],
             args.out,
             fit_config=config,
             fit_name=args.fit_name,

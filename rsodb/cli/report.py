@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 import rsodb
-from rsodb.cli.archive_options import fail
+from rsodb.cli.archive_options import add_archive_option, fail, open_archive
 
 __all__ = ["register", "run", "REPORT_KINDS"]
 
@@ -31,7 +31,7 @@ The fits come from 'rsodb fit' or 'rsodb campaign' (stored under --name, default
 
 
 def _common_arguments(parser) -> None:
-    parser.add_argument("--archive", required=True, metavar="DIR", help="archive directory")
+    add_archive_option(parser)
     parser.add_argument("--object", type=int, required=True, metavar="NORAD", help="the object (NORAD number)")
     parser.add_argument("--out", required=True, metavar="FILE.html", help="HTML file to write")
     parser.add_argument("--band", help="only this band")
@@ -54,7 +54,7 @@ def _campaign_arguments(parser) -> None:
 def _periods_report(args):
     verdicts = ("confident", "ambiguous harmonic") if args.include_ambiguous else ("confident",)
     return rsodb.report.build_period_report(
-        rsodb.Archive(args.archive, create=False),
+        open_archive(args),
         args.object,
         name=args.name,
         band=args.band,
@@ -65,7 +65,7 @@ def _periods_report(args):
 
 def _campaign_report(args):
     return rsodb.report.build_campaign_report(
-        rsodb.Archive(args.archive, create=False),
+        open_archive(args),
         args.object,
         name=args.name,
         periods_name=args.periods_name,
@@ -83,7 +83,8 @@ REPORT_KINDS = {
         _periods_report,
     ),
     "campaign": (
-        "spin-state fits of one object: parameters against date, fitted vs periodogram periods",
+        "spin-state fits of one object: per pass the spin state with intervals and a trust level, the "
+        "posterior band over the pass, corner, trace and periodogram; parameters against date",
         CAMPAIGN_EXAMPLE,
         _campaign_arguments,
         _campaign_report,

@@ -9,10 +9,11 @@ See docs/fitting.md for the model, the likelihood's derivation and how to run a 
 
 from rsodb.fit.config import FitConfig
 from rsodb.fit.likelihood import LIKELIHOODS, GaussianLikelihood, NormalisedLikelihood, make_likelihood
-from rsodb.fit.model import ATTITUDES, ConvexFacets, SpinStateModel
+from rsodb.fit.model import ATTITUDES, ConvexFacets, SpinStateModel, make_attitude
 from rsodb.fit.parameters import KNOWN, Parameter, ParameterSpace
 from rsodb.fit.plots import save_all
 from rsodb.fit.posterior import Posterior
+from rsodb.fit.prediction import FitPrediction, predict_fit
 from rsodb.fit.priors import BoundedNormal, Uniform, prior_from_dict
 from rsodb.fit.result import FitResult
 from rsodb.fit.runner import FitProblem, fit_pass, fit_problem
@@ -28,6 +29,9 @@ __all__ = [
     "ATTITUDES",
     "ConvexFacets",
     "SpinStateModel",
+    "make_attitude",
+    "FitPrediction",
+    "predict_fit",
     "KNOWN",
     "Parameter",
     "ParameterSpace",

@@ -17,15 +17,17 @@ from typing import Any
 
 from rsodb.fit.likelihood import LIKELIHOODS, OFFSET_MODES
 from rsodb.fit.model import ATTITUDES
-from rsodb.fit.parameters import KNOWN, Parameter, ParameterSpace
+from rsodb.fit.parameters import Parameter, ParameterSpace, describe
 from rsodb.fit.priors import Uniform, prior_from_dict
 from rsodb.fit.sampler import SamplerSettings
-from rsodb.fit.shapes import SHAPES
+from rsodb.fit.shapes import SHAPES, articulation_from_dict
 
 __all__ = ["FitConfig", "ModelConfig", "DataConfig", "LikelihoodConfig", "PERIODS_PRIOR"]
 
 # The default spin-period prior: +-1% around the stored (sidereal) period.
-PERIODS_PRIOR = MappingProxyType({"from": "periods", "width": 0.01, "multiple": 1.0, "frame": "sidereal"})
+PERIODS_PRIOR = MappingProxyType(
+    {"from": "periods", "width": 0.01, "multiple": 1.0, "frame": "sidereal", "force": False}
+)
 DEFAULT_JITTER_PRIOR = Uniform(0.0, 0.5)
 
 
@@ -37,9 +39,18 @@ def _check_keys(section: str, record: Mapping, allowed) -> None:
 
 @dataclass(frozen=True)
 class ModelConfig:
-    """The forward model: shape, attitude family and renderer."""
+    """The forward model: shape (a built-in name or a mesh file), attitude family and renderer.
+
+    ``mesh`` (OBJ, PLY, glTF) with ``materials`` (its materials JSON) and ``articulations``
+    (tables of ``parameter``, ``part``, ``axis``, ``point_m``, ``rest_deg``) fits any scene;
+    relative paths in a TOML file are relative to that file.
+    """
 
     shape: str = "auto"
+    mesh: str = ""
+    materials: str = ""
+    articulations: tuple = ()
+    repair_mesh: bool = False
     attitude: str = "precessing"
     spin_axis: str = "z"
     renderer: str = "cached"
@@ -48,7 +59,27 @@ class ModelConfig:
 
     def __post_init__(self):
         if self.shape != "auto" and self.shape not in SHAPES:
-            raise ValueError(f"[model] shape={self.shape!r} is not auto or one of {', '.join(SHAPES)}")
+            raise ValueError(
+                f"[model] shape={self.shape!r} is not auto or one of {', '.join(SHAPES)} "
+                "(for a mesh file give mesh = PATH instead)"
+            )
+        for key in ("mesh", "materials"):
+            if not isinstance(getattr(self, key), str):
+                raise ValueError(f"[model] {key}={getattr(self, key)!r} must be a file path (text)")
+        if self.mesh and self.shape != "auto":
+            raise ValueError(f"[model] gives both shape={self.shape!r} and mesh={self.mesh!r}; keep one")
+        if (self.materials or self.articulations) and not self.mesh:
+            raise ValueError("[model] materials and articulations describe a mesh file: give mesh = PATH too")
+        if isinstance(self.articulations, Mapping) or not isinstance(self.articulations, (list, tuple)):
+            raise ValueError(
+                f"[model] articulations={self.articulations!r} must be a list of tables "
+                "(parameter, part, axis, point_m, rest_deg)"
+            )
+        for record in self.articulations:
+            if not isinstance(record, Mapping):
+                raise ValueError(f"[model] articulations: {record!r} must be a table (parameter, part, axis, ...)")
+            articulation_from_dict(record)
+        object.__setattr__(self, "articulations", tuple(dict(a) for a in self.articulations))
         if self.attitude not in ATTITUDES:
             raise ValueError(f"[model] attitude={self.attitude!r} is not one of {', '.join(ATTITUDES)}")
         if self.spin_axis not in ("x", "y", "z"):
@@ -69,24 +100,31 @@ class ModelConfig:
 
 @dataclass(frozen=True)
 class DataConfig:
-    """Which samples of the pass are fitted."""
+    """Which samples of the pass are fitted (`rsodb.fit.selection`).
+
+    The window (``start_s``, ``duration_s``) is what residuals cover; ``max_points`` limits what
+    the likelihood sees, by binning consecutive samples (each bin turning the body by at most
+    ``bin_turn_deg`` at the fastest spin of the prior) and then contiguous windows (``windows``;
+    0 chooses as many as keep each a cycle long), never by a stride.
+    """
 
     start_s: float = 0.0
     duration_s: float = 0.0
-    stride: int = 1
     max_points: int = 0
+    bin_turn_deg: float = 10.0
+    windows: int = 0
     keep_saturated: bool = False
     mag_err_floor: float = 0.0
 
     def __post_init__(self):
-        for name in ("start_s", "duration_s", "mag_err_floor"):
+        for name in ("start_s", "duration_s", "mag_err_floor", "bin_turn_deg"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise ValueError(f"[data] {name}={value!r} must be a number >= 0")
-        if not (isinstance(self.stride, int) and self.stride >= 1):
-            raise ValueError(f"[data] stride={self.stride!r} must be a whole number >= 1")
         if not (isinstance(self.max_points, int) and (self.max_points == 0 or self.max_points >= 10)):
             raise ValueError(f"[data] max_points={self.max_points!r} must be 0 (no limit) or a whole number >= 10")
+        if not (isinstance(self.windows, int) and self.windows >= 0):
+            raise ValueError(f"[data] windows={self.windows!r} must be 0 (chosen) or a whole number >= 1")
 
 
 @dataclass(frozen=True)
@@ -104,8 +142,10 @@ class LikelihoodConfig:
 
 
 def _check_parameter_spec(name: str, spec) -> None:
-    if name not in KNOWN:
-        raise ValueError(f"[parameters] {name!r} is not a known parameter; known: {', '.join(KNOWN)}")
+    try:
+        describe(name)
+    except ValueError as error:
+        raise ValueError(f"[parameters] {error}") from None
     if isinstance(spec, bool) or not isinstance(spec, (int, float, Mapping)):
         raise ValueError(f"[parameters] {name} = {spec!r} must be a number (fixed) or a table (prior)")
     if isinstance(spec, (int, float)) and not math.isfinite(spec):
@@ -113,7 +153,7 @@ def _check_parameter_spec(name: str, spec) -> None:
     if isinstance(spec, Mapping) and "from" in spec:
         if spec["from"] != "periods" or name != "spin_period_s":
             raise ValueError(f'[parameters] {name}: only spin_period_s can take its prior from = "periods"')
-        _check_keys(f"parameters.{name}", spec, ("from", "width", "multiple", "frame"))
+        _check_keys(f"parameters.{name}", spec, tuple(PERIODS_PRIOR))
     elif isinstance(spec, Mapping):
         prior = prior_from_dict(spec, name)
         Parameter(name, prior)  # checks wrap windows of angles
@@ -130,10 +170,15 @@ class FitConfig:
     parameters: Mapping[str, Any] = field(default_factory=dict)
     sampler: SamplerSettings = field(default_factory=SamplerSettings)
     discard: int | None = None
+    band_draws: int = 50
 
     def __post_init__(self):
         if not isinstance(self.name, str) or not self.name:
             raise ValueError(f"fit name {self.name!r} must be a non-empty string")
+        if not (isinstance(self.band_draws, int) and 0 <= self.band_draws <= 1000):
+            raise ValueError(
+                f"band_draws={self.band_draws!r} must be a whole number 0..1000 (posterior draws of the model band)"
+            )
         for name, spec in dict(self.parameters).items():
             _check_parameter_spec(name, spec)
         object.__setattr__(self, "parameters", MappingProxyType(dict(self.parameters)))
@@ -150,10 +195,15 @@ class FitConfig:
     def from_dict(cls, record: Mapping) -> FitConfig:
         """Build from the dict form (what `tomllib` returns)."""
         sections = {"model": ModelConfig, "data": DataConfig, "likelihood": LikelihoodConfig}
-        _check_keys("top level", record, ("name", "discard", "parameters", "sampler", *sections))
-        kwargs: dict[str, Any] = {k: record[k] for k in ("name", "discard") if k in record}
+        _check_keys("top level", record, ("name", "discard", "band_draws", "parameters", "sampler", *sections))
+        kwargs: dict[str, Any] = {k: record[k] for k in ("name", "discard", "band_draws") if k in record}
         for key, cls_ in sections.items():
             section = record.get(key, {})
+            if key == "data" and "stride" in section:
+                raise ValueError(
+                    "[data] stride is gone: a fixed stride strobes a periodic light curve; "
+                    "use max_points (bins and contiguous windows) or start_s/duration_s"
+                )
             _check_keys(key, section, cls_.__dataclass_fields__)
             kwargs[key] = cls_(**section)
         sampler = record.get("sampler", {})
@@ -173,6 +223,12 @@ class FitConfig:
             raise FileNotFoundError(f"fit configuration {path} does not exist; give the path of a .toml file") from None
         except tomllib.TOMLDecodeError as error:
             raise ValueError(f"{path}: not valid TOML ({error})") from None
+        model = record.get("model")
+        if isinstance(model, dict):
+            # Mesh paths in a file are relative to the file, wherever the fit runs from.
+            for key in ("mesh", "materials"):
+                if isinstance(model.get(key), str) and model[key] and not Path(model[key]).is_absolute():
+                    model[key] = str((path.parent / model[key]).resolve())
         try:
             return cls.from_dict(record)
         except (TypeError, ValueError) as error:
@@ -183,7 +239,8 @@ class FitConfig:
         return {
             "name": self.name,
             "discard": self.discard,
-            "model": asdict(self.model),
+            "band_draws": self.band_draws,
+            "model": dict(asdict(self.model), articulations=[dict(a) for a in self.model.articulations]),
             "data": asdict(self.data),
             "likelihood": asdict(self.likelihood),
             "parameters": dict(self.parameters),
@@ -197,6 +254,10 @@ class FitConfig:
         return replace(self, **changes)
 
     # -- the parameter space ------------------------------------------------------------------
+    def with_model(self, **changes) -> FitConfig:
+        """A copy with ``[model]`` keys changed (e.g. ``mesh=``, ``spin_axis=``)."""
+        return replace(self, model=replace(self.model, **changes))
+
     def parameter_specs(self, shape_articulations: Mapping[str, float]) -> dict[str, Any]:
         """Every parameter's spec (defaults overlaid with the configured ones), model order."""
         specs: dict[str, Any] = {}
@@ -239,9 +300,23 @@ def _period_prior(spec: Mapping, periods) -> Uniform:
         )
     width = float(spec.get("width", PERIODS_PRIOR["width"]))
     multiple = float(spec.get("multiple", PERIODS_PRIOR["multiple"]))
+    force = spec.get("force", PERIODS_PRIOR["force"])
+    if not isinstance(force, bool):
+        raise ValueError(f"[parameters] spin_period_s: force={force!r} must be true or false")
     if not (math.isfinite(multiple) and multiple > 0):
         raise ValueError(f"[parameters] spin_period_s: multiple={multiple!r} must be a positive number (e.g. 2 for 2P)")
-    low, high = periods.prior_interval_s(width_frac=width, frame=spec.get("frame", PERIODS_PRIOR["frame"]))
+    if not math.isfinite(periods.best_period_s):
+        raise ValueError(
+            f"pass {periods.pass_id or periods.label!r} has no stored period (verdict {periods.verdict!r}: "
+            f"{periods.reason}); give spin_period_s a prior in the fit configuration"
+        )
+    if not force and not periods.has_period:
+        raise ValueError(
+            f"the stored period of pass {periods.pass_id or periods.label!r} has verdict {periods.verdict!r} "
+            f"({periods.reason}); give spin_period_s a prior in the fit configuration, or use that period "
+            "anyway with --force (force = true in [parameters] spin_period_s)"
+        )
+    low, high = periods.prior_interval_s(width_frac=width, frame=spec.get("frame", PERIODS_PRIOR["frame"]), force=force)
     return Uniform(low * multiple, high * multiple)
 
 

@@ -3,14 +3,16 @@
 `inject` renders a forward model at chosen parameter values on the times of a template pass,
 adds a magnitude offset and Gaussian noise, and returns a new `Pass` that can be archived and
 fitted like an observation. `window` cuts a pass to a time range first (e.g. the published
-workflow's 30 s). `recover` is one injection-recovery trial with the truth drawn from the fit's
-own prior (the coverage study of bench/fit_coverage.py and tests/test_fit_coverage.py).
+workflow's 30 s), optionally binning consecutive samples into longer exposures (never taking
+every k-th). `recover` is one injection-recovery trial with the truth drawn from the fit's own
+prior (the coverage study of bench/fit_coverage.py and tests/test_fit_coverage.py);
+`recover_observed` fits a pass rendered elsewhere (e.g. by Blender Cycles) against its truth.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 import hashlib
 import math
 from pathlib import Path
@@ -20,9 +22,9 @@ import numpy as np
 
 from ingest.observation import ARRAY_FIELDS, Pass
 from rsodb.fit.config import FitConfig
-from rsodb.fit.result import FitResult
 from rsodb.fit.runner import FitProblem
 from rsodb.fit.sampler import run_sampler
+from rsodb.fit.selection import Selection
 from rsodb.pool import imap_in_pool
 
 __all__ = [
@@ -30,6 +32,7 @@ __all__ = [
     "window",
     "Recovery",
     "recover",
+    "recover_observed",
     "draw_visible_truth",
     "coverage_bounds",
     "coverage_study",
@@ -37,21 +40,45 @@ __all__ = [
 ]
 
 
-def window(observed: Pass, start_s: float, duration_s: float, stride: int = 1) -> Pass:
-    """The samples of `observed` with ``start_s <= t_s <= start_s + duration_s``, every `stride`-th.
+def window(observed: Pass, start_s: float, duration_s: float, bin_size: int = 1) -> Pass:
+    """The samples of `observed` with ``start_s <= t_s <= start_s + duration_s``.
 
-    Returns a plain `Pass` (an archived pass loses its archive identity).
+    With ``bin_size > 1`` every `bin_size` consecutive samples become one sample: the magnitude
+    of their mean flux at their mid-time, an exposure spanning them all (a remainder at the end
+    is left out). Returns a plain `Pass` (an archived pass loses its archive identity).
     """
     t_s = observed.t_s
-    index = np.flatnonzero((t_s >= start_s) & (t_s <= start_s + duration_s))[::stride]
-    if index.size < 2:
+    index = np.flatnonzero((t_s >= start_s) & (t_s <= start_s + duration_s))
+    if index.size < 2 * bin_size:
         raise ValueError(
             f"window start_s={start_s}, duration_s={duration_s} holds {index.size} samples of a "
             f"{observed.duration_s:.1f} s pass; choose a window inside the pass"
         )
+    if not (isinstance(bin_size, int) and bin_size >= 1):
+        raise ValueError(f"bin_size={bin_size!r} must be a whole number >= 1")
     arrays = {name: getattr(observed, name)[index] for name in ARRAY_FIELDS}
     corrected = None if observed.mag_corrected is None else observed.mag_corrected[index]
-    return Pass(**{**_scalar_fields(observed), **arrays, "mag_corrected": corrected})
+    cut = Pass(**{**_scalar_fields(observed), **arrays, "mag_corrected": corrected})
+    if bin_size == 1:
+        return cut
+    whole = len(cut) // bin_size * bin_size
+    groups = np.arange(whole).reshape(-1, bin_size)
+    bins = Selection(np.ones(len(cut), dtype=bool), groups, "", None)
+    # The bins hold the best magnitudes (corrected where the file needed it) as their `mag`.
+    mag, mag_err = bins.magnitudes(cut)
+    mean = {name: getattr(cut, name)[groups].mean(axis=1) for name in ("az_deg", "el_deg", "range_km")}
+    return cut.replace(
+        flux=cut.flux[groups].sum(axis=1),
+        flux_err=np.sqrt(np.sum(cut.flux_err[groups] ** 2, axis=1)),
+        exposure_s=bins.exposure_s(cut),
+        time_utc=bins.time_utc(cut),
+        mag=mag,
+        mag_err=mag_err,
+        saturated=cut.saturated[groups].any(axis=1),
+        valid=cut.valid[groups].all(axis=1),
+        mag_corrected=None,
+        **mean,
+    )
 
 
 def _scalar_fields(observed: Pass) -> dict:
@@ -140,12 +167,16 @@ class Recovery:
     quantile : mapping of str to float
         Fraction of the kept posterior draws below the truth (0..1). For a calibrated fit it
         is uniform over truths drawn from the prior; `covered` is ``0.16 <= quantile <= 0.84``
-        up to the percentiles' interpolation.
+        up to the percentiles' interpolation, `covered95` is ``0.025 <= quantile <= 0.975``.
     autocorr_lengths : float
         Kept chain length in autocorrelation times (the longest tau of any parameter).
     converged : bool
     verdict : str
     elapsed_s : float
+    bias_sigma : mapping of str to float
+        (median - truth) over the posterior's sigma, half the 16-84% width.
+    residual_rms_mag : float
+        RMS of data minus best fit over every sample of the fitted window.
     """
 
     truth: Mapping[str, float]
@@ -158,28 +189,43 @@ class Recovery:
     converged: bool
     verdict: str
     elapsed_s: float
+    bias_sigma: Mapping[str, float] = field(default_factory=dict)
+    residual_rms_mag: float = math.nan
+
+    @property
+    def covered95(self) -> dict[str, bool]:
+        return {name: bool(0.025 <= q <= 0.975) for name, q in self.quantile.items()}
+
+
+def _on_branch(parameter, value: float, centre: float) -> float:
+    """`value` moved by whole periods of a wrapped angle to within half a period of `centre`."""
+    if parameter.period is None:
+        return value
+    return centre + np.mod(value - centre + parameter.period / 2, parameter.period) - parameter.period / 2
 
 
 def _covered(space, result, truth) -> dict[str, bool]:
-    covered = {}
+    return {
+        p.name: bool(result.p16[i] <= _on_branch(p, truth[p.name], result.median[i]) <= result.p84[i])
+        for i, p in enumerate(space.free)
+    }
+
+
+def _bias_sigma(space, result, truth) -> dict[str, float]:
+    bias = {}
     for i, parameter in enumerate(space.free):
-        value = truth[parameter.name]
-        if parameter.period is not None:
-            centre = result.median[i]
-            value = centre + np.mod(value - centre + parameter.period / 2, parameter.period) - parameter.period / 2
-        covered[parameter.name] = bool(result.p16[i] <= value <= result.p84[i])
-    return covered
+        sigma = 0.5 * (result.p84[i] - result.p16[i])
+        value = _on_branch(parameter, truth[parameter.name], result.median[i])
+        bias[parameter.name] = float((result.median[i] - value) / sigma) if sigma > 0 else math.inf
+    return bias
 
 
 def _quantiles(space, result, truth) -> dict[str, float]:
     quantiles = {}
     for i, parameter in enumerate(space.free):
         draws = result.samples[:, i]
-        value = truth[parameter.name]
-        if parameter.period is not None:
-            # The draws are unrolled around their circular mean: put the truth on their branch.
-            centre = np.median(draws)
-            value = centre + np.mod(value - centre + parameter.period / 2, parameter.period) - parameter.period / 2
+        # The draws are unrolled around their circular mean: put the truth on their branch.
+        value = _on_branch(parameter, truth[parameter.name], np.median(draws))
         quantiles[parameter.name] = float(np.mean(draws < value))
     return quantiles
 
@@ -196,18 +242,73 @@ def draw_visible_truth(posterior, rng: np.random.Generator, attempts: int = 200)
     raise RuntimeError(f"no prior draw in {attempts} gave a visible object; narrow the priors")
 
 
-def recover(template: Pass, config, seed: int, *, noise_mag: float, chain_dir) -> Recovery:
+def recover_observed(
+    observed: Pass, config, truth: Mapping[str, float], seed: int, *, chain_dir, store=None
+) -> Recovery:
+    """Fit `observed` and compare the posterior with the `truth` it was made from.
+
+    Parameters
+    ----------
+    observed : Pass
+        The pass to fit (rendered from `truth` by anything: the project's model, Blender Cycles).
+    config : FitConfig
+        The fit; its spin-period prior must not come from a stored period.
+    truth : mapping
+        True values of the fit's free parameters.
+    seed : int
+        Seeds the sampler; names the chain file.
+    chain_dir : path
+        Where the chain file goes (removed afterwards).
+    store : ShapeStore, optional
+        Shape caches (a process pool's workers share a disk store).
+    """
+    started = time.perf_counter()
+    config = config.replace(sampler={"seed": int(seed)})
+    problem = FitProblem.build(observed, config, store=store)
+    chain = Path(chain_dir) / f"coverage_{seed}.h5"
+    run = run_sampler(
+        problem.posterior,
+        config.sampler,
+        chain,
+        restart=True,
+        progress=False,
+        search_posterior=problem.search_posterior,
+    )
+    result = problem.summarise(run)
+    chain.unlink(missing_ok=True)
+    chain.with_name(chain.name + ".bak").unlink(missing_ok=True)
+    space = problem.posterior.space
+    names = space.names
+    truth = {name: float(truth[name]) for name in names}
+    return Recovery(
+        truth,
+        dict(zip(names, result.median.tolist())),
+        dict(zip(names, result.p16.tolist())),
+        dict(zip(names, result.p84.tolist())),
+        _covered(space, result, truth),
+        _quantiles(space, result, truth),
+        float((result.n_steps - result.discard) / np.nanmax(result.autocorr_time)),
+        result.converged,
+        result.verdict,
+        time.perf_counter() - started,
+        _bias_sigma(space, result, truth),
+        result.residual_rms_mag,
+    )
+
+
+def recover(template: Pass, config, seed: int, *, noise_mag: float, chain_dir, store=None) -> Recovery:
     """Draw a truth from the fit's prior, inject it on `template`, fit it, compare.
 
     The truth is drawn from the same prior the fit uses, so the 68% intervals of a correct
     sampler and likelihood contain it 68% of the time over many draws (simulation-based
     calibration). A truth ``jitter_mag`` adds that much extra Gaussian scatter beyond the
-    quoted error `noise_mag`.
+    quoted error `noise_mag`. The truth is rendered on every sample of `template` (the fit
+    itself may bin them, `config.data`).
 
     Parameters
     ----------
     template : Pass
-        Times, geometry and band (every sample is used: cut it with `window` first).
+        Times, geometry and band (cut it with `window` first).
     config : FitConfig
         The fit; its spin-period prior must not come from a stored period.
     seed : int
@@ -216,11 +317,11 @@ def recover(template: Pass, config, seed: int, *, noise_mag: float, chain_dir) -
         Quoted error of every sample.
     chain_dir : path
         Where the chain file goes.
+    store : ShapeStore, optional
     """
     rng = np.random.default_rng(seed)
-    config = config.replace(sampler={"seed": int(seed)})
-    started = time.perf_counter()
-    reference = FitProblem.build(template, config)
+    every_sample = config.replace(data=replace(config.data, max_points=0, start_s=0.0, duration_s=0.0))
+    reference = FitProblem.build(template, every_sample, store=store)
     truth = draw_visible_truth(reference.posterior, rng)
     values = dict(reference.posterior.space.fixed, **truth)
     jitter = values.get("jitter_mag", 0.0)
@@ -233,39 +334,7 @@ def recover(template: Pass, config, seed: int, *, noise_mag: float, chain_dir) -
         saturated=np.zeros(n, dtype=bool),
         mag_corrected=None,
     )
-    problem = FitProblem.build(observed, config)
-    chain = Path(chain_dir) / f"coverage_{seed}.h5"
-    run = run_sampler(
-        problem.posterior,
-        config.sampler,
-        chain,
-        restart=True,
-        progress=False,
-        search_posterior=problem.search_posterior,
-    )
-    result = FitResult.from_run(
-        run,
-        problem.posterior,
-        pass_id=f"coverage-{seed}",
-        name=config.name,
-        time_utc=problem.time_utc,
-        discard=config.discard,
-    )
-    chain.unlink(missing_ok=True)
-    chain.with_name(chain.name + ".bak").unlink(missing_ok=True)
-    names = problem.posterior.space.names
-    return Recovery(
-        truth,
-        dict(zip(names, result.median.tolist())),
-        dict(zip(names, result.p16.tolist())),
-        dict(zip(names, result.p84.tolist())),
-        _covered(problem.posterior.space, result, truth),
-        _quantiles(problem.posterior.space, result, truth),
-        float((result.n_steps - result.discard) / np.nanmax(result.autocorr_time)),
-        result.converged,
-        result.verdict,
-        time.perf_counter() - started,
-    )
+    return recover_observed(observed, config, truth, seed, chain_dir=chain_dir, store=store)
 
 
 def coverage_bounds(n: int, p: float = 0.68, sigmas: float = 3.0) -> tuple[float, float]:
@@ -275,13 +344,20 @@ def coverage_bounds(n: int, p: float = 0.68, sigmas: float = 3.0) -> tuple[float
 
 
 def _recover_task(task) -> Recovery:
-    template, record, seed, noise_mag, chain_dir = task
-
-    return recover(template, FitConfig.from_dict(record), seed, noise_mag=noise_mag, chain_dir=chain_dir)
+    template, record, seed, noise_mag, chain_dir, store = task
+    return recover(template, FitConfig.from_dict(record), seed, noise_mag=noise_mag, chain_dir=chain_dir, store=store)
 
 
 def coverage_study(
-    template: Pass, config, seeds, *, noise_mag: float, chain_dir, processes: int | None = None, progress: bool = True
+    template: Pass,
+    config,
+    seeds,
+    *,
+    noise_mag: float,
+    chain_dir,
+    processes: int | None = None,
+    progress: bool = True,
+    store=None,
 ) -> list[Recovery]:
     """`recover` for every seed, in a process pool; results in seed order.
 
@@ -290,7 +366,7 @@ def coverage_study(
     list of Recovery
     """
     record = config.replace(sampler={"processes": 1}).to_dict()
-    tasks = [(template, record, int(seed), float(noise_mag), str(chain_dir)) for seed in seeds]
+    tasks = [(template, record, int(seed), float(noise_mag), str(chain_dir), store) for seed in seeds]
     return list(
         imap_in_pool(
             _recover_task,
@@ -304,7 +380,10 @@ def coverage_study(
     )
 
 
-def coverage_table(recoveries) -> dict[str, float]:
-    """Fraction of truths inside the 68% interval, per parameter."""
+def coverage_table(recoveries, level: int = 68) -> dict[str, float]:
+    """Fraction of truths inside the 68% (or, with ``level=95``, the 95%) interval, per parameter."""
+    if level not in (68, 95):
+        raise ValueError(f"level={level!r} must be 68 or 95")
     names = list(recoveries[0].covered)
-    return {name: float(np.mean([r.covered[name] for r in recoveries])) for name in names}
+    inside = [r.covered if level == 68 else r.covered95 for r in recoveries]
+    return {name: float(np.mean([c[name] for c in inside])) for name in names}

@@ -36,7 +36,7 @@ from raycast.geometry.attitude import InertialSpin, PrecessingSpin, TorqueFree
 from raycast.renderer.photometry import magnitude, solar_magnitude
 from raycast.renderer.scene import icosphere
 
-__all__ = ["ConvexFacets", "SpinStateModel", "AttitudeFamily", "ATTITUDES", "EpochShifted"]
+__all__ = ["ConvexFacets", "SpinStateModel", "AttitudeFamily", "ATTITUDES", "EpochShifted", "make_attitude"]
 
 
 # -- brightness: an analytic convex body ---------------------------------------------------
@@ -260,6 +260,37 @@ ATTITUDES: Mapping[str, AttitudeFamily] = MappingProxyType(
 )
 
 
+def make_attitude(family: str, values: Mapping[str, float], settings: Mapping | None = None, epoch_s: float = 0.0):
+    """The attitude model of a family at parameter values, phases at `epoch_s`.
+
+    Parameters
+    ----------
+    family : str
+        A key of `ATTITUDES`.
+    values : mapping of str to float
+        At least the family's parameters (`AttitudeFamily.parameters`).
+    settings : mapping, optional
+        The family's settings, e.g. ``{"spin_axis": "x"}``.
+    epoch_s : float
+        Reference time of the phases, seconds after the time origin of the geometry it is used
+        with (a fit's: its window's mid-time).
+    """
+    if family not in ATTITUDES:
+        raise ValueError(f"unknown attitude model {family!r}; use one of {', '.join(ATTITUDES)}")
+    spec = ATTITUDES[family]
+    missing = [name for name in spec.parameters if name not in values]
+    if missing:
+        raise ValueError(
+            f"the {family} attitude needs {', '.join(missing)}; give every one of {', '.join(spec.parameters)}"
+        )
+    unknown = sorted(set(settings or {}) - set(spec.settings))
+    if unknown:
+        raise ValueError(
+            f"attitude model {family!r} has no settings {unknown}; it accepts {', '.join(spec.settings) or 'none'}"
+        )
+    return EpochShifted(spec.build(values, **dict(settings or {})), float(epoch_s))
+
+
 # -- the forward model -----------------------------------------------------------------------
 @dataclass(frozen=True, eq=False)
 class SpinStateModel:
@@ -329,6 +360,16 @@ class SpinStateModel:
         )
 
     @property
+    def epoch_utc(self) -> np.datetime64:
+        """The reference epoch of the phases, UTC."""
+        return self.geometry.time_utc[0] + np.timedelta64(int(round(self.epoch_s * 1e9)), "ns")
+
+    def on(self, geometry) -> SpinStateModel:
+        """The same model on other times (`geometry`), its phases still referred to `epoch_utc`."""
+        epoch_s = float((self.epoch_utc - geometry.time_utc[0]) / np.timedelta64(1, "s"))
+        return replace(self, geometry=geometry, epoch_s=epoch_s)
+
+    @property
     def parameters(self) -> tuple[str, ...]:
         """Every parameter name the model reads."""
         return ATTITUDES[self.attitude].parameters + self.brightness_parameters
@@ -339,8 +380,7 @@ class SpinStateModel:
 
     def attitude_model(self, values: Mapping[str, float]):
         """The attitude for these values, phases referred to `epoch_s`."""
-        family = ATTITUDES[self.attitude]
-        return EpochShifted(family.build(values, **self.attitude_settings), self.epoch_s)
+        return EpochShifted(ATTITUDES[self.attitude].build(values, **self.attitude_settings), self.epoch_s)
 
     def supports(self, values: Mapping[str, float]) -> bool:
         """False where the values describe no physical body (impossible inertia ratios, albedo > 1)."""

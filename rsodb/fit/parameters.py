@@ -22,7 +22,7 @@ import numpy as np
 
 from rsodb.fit.priors import Prior, Uniform, prior_from_dict
 
-__all__ = ["Parameter", "ParameterSpace", "KNOWN", "Known"]
+__all__ = ["Parameter", "ParameterSpace", "KNOWN", "Known", "describe"]
 
 
 @dataclass(frozen=True)
@@ -101,6 +101,27 @@ KNOWN: Mapping[str, Known] = MappingProxyType(
 )
 
 
+def describe(name: str) -> Known:
+    """What the project knows about a parameter: its `KNOWN` entry, or, for another name ending
+    in ``_deg``, an articulation angle of a mesh model (``[model] articulations``).
+
+    Raises
+    ------
+    ValueError
+        For any other name.
+    """
+    if name in KNOWN:
+        return KNOWN[name]
+    if isinstance(name, str) and name.endswith("_deg") and name.isidentifier():
+        return Known(
+            name.removesuffix("_deg"), "deg", None, Uniform(-180.0, 180.0), "articulation angle of a mesh part"
+        )
+    raise ValueError(
+        f"unknown parameter {name!r}; known parameters: {', '.join(KNOWN)} "
+        "(and articulation angles of a mesh, named ..._deg)"
+    )
+
+
 @dataclass(frozen=True)
 class Parameter:
     """One free parameter.
@@ -117,32 +138,29 @@ class Parameter:
     prior: Prior
 
     def __post_init__(self):
-        if self.name not in KNOWN:
-            raise ValueError(f"unknown parameter {self.name!r}; known parameters: {', '.join(KNOWN)}")
-        period = KNOWN[self.name].period
+        known = describe(self.name)
+        period = known.period
         if period is not None and not np.isclose(self.prior.high - self.prior.low, period):
             raise ValueError(
-                f"{self.name} wraps every {period:g} {KNOWN[self.name].unit} but its prior covers "
+                f"{self.name} wraps every {period:g} {known.unit} but its prior covers "
                 f"[{self.prior.low:g}, {self.prior.high:g}]; give a uniform prior one period wide"
             )
 
     @property
     def period(self) -> float | None:
         """Wrap period (360 for phases), or None for an ordinary parameter."""
-        return KNOWN[self.name].period
+        return describe(self.name).period
 
     @property
     def label(self) -> str:
         """Short plot label with unit, e.g. ``"P [s]"``."""
-        known = KNOWN[self.name]
+        known = describe(self.name)
         return f"{known.label} [{known.unit}]" if known.unit else known.label
 
     @classmethod
     def default(cls, name: str) -> Parameter:
         """The parameter with its default prior from `KNOWN`."""
-        if name not in KNOWN:
-            raise ValueError(f"unknown parameter {name!r}; known parameters: {', '.join(KNOWN)}")
-        return cls(name, KNOWN[name].default_prior)
+        return cls(name, describe(name).default_prior)
 
 
 @dataclass(frozen=True)
@@ -169,9 +187,8 @@ class ParameterSpace:
         both = sorted(set(names) & set(fixed))
         if both:
             raise ValueError(f"parameters {both} are both free and fixed; choose one")
-        unknown = sorted(set(fixed) - set(KNOWN))
-        if unknown:
-            raise ValueError(f"unknown fixed parameters {unknown}; known parameters: {', '.join(KNOWN)}")
+        for name in fixed:
+            describe(name)
         if not free:
             raise ValueError("a parameter space needs at least one free parameter")
         object.__setattr__(self, "free", free)

@@ -9,21 +9,23 @@ worker processes and threads) and saves it when given a path.
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
+import textwrap
 
 import numpy as np
 
 from rsodb.fit.likelihood import NormalisedLikelihood
 from rsodb.fit.sampler import read_chain
 
-__all__ = ["corner_figure", "lightcurve_figure", "trace_figure", "save_all"]
+__all__ = ["corner_figure", "lightcurve_figure", "prediction_figure", "trace_figure", "save_all"]
 
 
-def _figure(width_in: float, height_in: float):
+def _figure(width_in: float, height_in: float, layout: str | None = "constrained"):
     # matplotlib loads in about a second; only drawing needs it.
     from matplotlib.figure import Figure
 
-    return Figure(figsize=(width_in, height_in), layout="constrained")
+    return Figure(figsize=(width_in, height_in), layout=layout)
 
 
 def _saved(figure, path, dpi: int = 110):
@@ -48,8 +50,30 @@ def corner_figure(result, path=None, truths=None):
     import corner
 
     ndim = len(result.names)
-    figure = _figure(1.5 * ndim + 1, 1.5 * ndim + 1)
+    # No layout engine: corner places its panels itself (subplots_adjust), which a constrained
+    # layout would refuse with a warning.
+    figure = _figure(1.5 * ndim + 1, 1.5 * ndim + 1, layout=None)
     marks = None if truths is None else [truths.get(n) for n in result.names]
+    quiet = _WithoutContourWarnings()
+    logging.getLogger().addFilter(quiet)
+    try:
+        _corner(corner, result, figure, marks)
+    finally:
+        logging.getLogger().removeFilter(quiet)
+    figure.suptitle(f"{result.pass_id}: posterior of fit {result.name!r}", fontsize=10)
+    return _saved(figure, path, dpi=80)
+
+
+class _WithoutContourWarnings(logging.Filter):
+    """Drops corner's root-logger warning for a panel whose draws are too concentrated for
+    contours (a clump of a short chain): the panel shows the draws anyway, and the warning
+    would be printed once per panel per fit."""
+
+    def filter(self, record) -> bool:
+        return "Too few points to create valid contours" not in record.getMessage()
+
+
+def _corner(corner, result, figure, marks) -> None:
     corner.corner(
         np.asarray(result.samples),
         fig=figure,
@@ -60,43 +84,126 @@ def corner_figure(result, path=None, truths=None):
         truths=marks,
         title_kwargs={"fontsize": 9},
         label_kwargs={"fontsize": 9},
+        # Three ticks and labels set off from them: more overlap at 1.5 inches a panel.
+        max_n_ticks=3,
+        labelpad=0.2,
     )
-    figure.suptitle(f"{result.pass_id}: posterior of fit {result.name!r}", fontsize=10)
-    return _saved(figure, path, dpi=80)
+    for axis in figure.axes:
+        axis.tick_params(labelsize=7)
 
 
-def lightcurve_figure(result, path=None):
-    """Observed magnitudes with errors, the best-fit synthetic curve, and the residuals."""
-    figure = _figure(10, 6)
+def _draw_pass(top, bottom, samples, curve, jitter_mag: float, model_label: str, mag_label: str) -> None:
+    """Observed samples of a pass (a `PassCurve`-like object), the model curve and band, the
+    fitted window shaded, and every sample's residual."""
+    start = samples.time_utc[0]
+    t = (samples.time_utc - start) / np.timedelta64(1, "s")
+    window, fitted = samples.in_window, samples.fitted
+    edges = t[window][[0, -1]]
+    for axis in (top, bottom):
+        axis.axvspan(*edges, color="C2", alpha=0.08, lw=0, label="fitted window" if axis is top else None)
+    inside = window & fitted
+    top.errorbar(
+        t[inside],
+        samples.mag_obs[inside],
+        samples.mag_err[inside],
+        fmt=".",
+        ms=3,
+        color="0.2",
+        elinewidth=0.4,
+        label="observed, fitted",
+    )
+    hollow = window & ~fitted
+    if hollow.any():
+        top.plot(
+            t[hollow],
+            samples.mag_obs[hollow],
+            "o",
+            ms=2.5,
+            mfc="none",
+            mec="0.35",
+            mew=0.5,
+            label="observed, in the window, not in the likelihood",
+        )
+    if (~window).any():
+        top.plot(t[~window], samples.mag_obs[~window], ".", ms=2, color="0.7", label="observed, outside the window")
+    if curve is not None:
+        ct = (curve.time_utc - start) / np.timedelta64(1, "s")
+        if curve.mag_band.size:
+            low, high = curve.band(0.025, 0.975)
+            top.fill_between(ct, low, high, color="C3", alpha=0.15, lw=0, label="model, 95% of posterior draws")
+            low, high = curve.band(0.16, 0.84)
+            top.fill_between(ct, low, high, color="C3", alpha=0.3, lw=0, label="model, 68%")
+        top.plot(ct, curve.mag_best, "-", lw=0.8, color="C3", label=model_label)
+    else:
+        top.plot(t, samples.mag_model, "-", lw=1.0, color="C3", label=f"{model_label}, at the samples")
+    top.invert_yaxis()
+    top.set_ylabel(mag_label)
+    top.legend(loc="best", fontsize=7)
+    sigma = np.hypot(samples.mag_err, jitter_mag)
+    bottom.axhline(0.0, color="0.5", lw=0.8)
+    bottom.fill_between(t, -sigma, sigma, color="C0", alpha=0.2, lw=0)
+    # Said in the title rather than a legend box, which would hide residuals.
+    bottom.set_title("residuals of every sample; shaded: 1 sigma (quoted errors + jitter)", fontsize=8, loc="left")
+    bottom.plot(t, samples.mag_obs - samples.mag_model, ".", ms=2, color="0.2")
+    bottom.invert_yaxis()
+    bottom.set_ylabel("obs - model [mag]")
+    bottom.set_xlabel(f"seconds since {str(start)[:23]} UTC")
+
+
+def lightcurve_figure(result, path=None, mag_label: str = "magnitude"):
+    """The whole pass: observed magnitudes, the model as a continuous curve with its posterior
+    band, the fitted window shaded, and the residuals of every sample.
+
+    Samples the likelihood saw are filled, other samples of the window hollow, samples outside
+    the window grey. The model curve is the stored fine-step curve (`FitResult.curve`), not the
+    model at the samples joined by lines, so a curve that swings between samples shows it.
+    `mag_label` names the magnitudes (`rsodb.plotting.magnitude_label` of the pass).
+    """
+    figure = _figure(11, 6.5)
     top, bottom = figure.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [3, 1]})
-    t = result.t_s
     if result.likelihood == "normalised":
-        observed, model, _ = NormalisedLikelihood(result.mag_obs, result.mag_err).compared(result.mag_model)
+        window = result.in_window
+        t = result.t_s[window]
+        observed, model, _ = NormalisedLikelihood(result.mag_obs[window], result.mag_err[window]).compared(
+            result.mag_model[window]
+        )
         top.plot(t, observed, ".", ms=3, color="0.3", label="observed (normalised)")
         top.plot(t, model, "-", lw=1.2, color="C3", label="best fit (normalised)")
         top.set_ylabel("normalised brightness")
-        residual, sigma = observed - model, None
+        top.legend(loc="best", fontsize=8)
+        bottom.plot(t, observed - model, ".", ms=3, color="0.2")
+        bottom.set_ylabel("obs - model")
+        bottom.set_xlabel(f"seconds since {str(result.time_utc[0])[:23]} UTC")
     else:
-        top.errorbar(t, result.mag_obs, result.mag_err, fmt=".", ms=3, color="0.3", elinewidth=0.5, label="observed")
-        top.plot(t, result.mag_model, "-", lw=1.2, color="C3", label=f"best fit (offset {result.offset_mag:+.2f} mag)")
-        top.invert_yaxis()
-        top.set_ylabel("magnitude")
-        residual, sigma = result.residuals_mag, np.hypot(result.mag_err, result.jitter_mag)
-    top.legend(loc="best", fontsize=8)
+        _draw_pass(
+            top,
+            bottom,
+            result,
+            result.curve,
+            result.jitter_mag,
+            f"best fit (offset {result.offset_mag:+.2f} mag)",
+            mag_label,
+        )
     top.set_title(
-        f"{result.pass_id}  fit {result.name!r}: residual RMS {result.residual_rms_mag:.3f} mag, "
-        f"reduced chi2 {result.reduced_chi2:.2f}",
+        f"{result.pass_id}  fit {result.name!r}: residual RMS {result.residual_rms_mag:.3f} mag over all "
+        f"{result.n_window} samples of the window, reduced chi2 {result.reduced_chi2:.2f}",
         fontsize=10,
     )
-    bottom.axhline(0.0, color="0.5", lw=0.8)
-    if sigma is not None:
-        bottom.fill_between(t, -sigma, sigma, color="C0", alpha=0.2, lw=0)
-        # Said in the title rather than a legend box, which would hide residuals.
-        bottom.set_title("residuals; shaded: 1 sigma (quoted errors + jitter)", fontsize=8, loc="left")
-    bottom.plot(t, residual, ".", ms=3, color="0.2")
-    bottom.invert_yaxis()
-    bottom.set_ylabel("obs - model [mag]" if sigma is not None else "obs - model")
-    bottom.set_xlabel(f"seconds since {str(result.time_utc[0])[:23]} UTC")
+    return _saved(figure, path)
+
+
+def prediction_figure(prediction, path=None, mag_label: str = "magnitude"):
+    """A stored fit replayed (`rsodb.fit.prediction.FitPrediction`): the posterior median over the
+    whole pass with the band of its posterior draws, and every sample's residual."""
+    result = prediction.result
+    figure = _figure(11, 6.5)
+    top, bottom = figure.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [3, 1]})
+    _draw_pass(top, bottom, prediction.samples, prediction.curve, result.jitter_mag, "posterior median", mag_label)
+    top.set_title(
+        f"{result.pass_id}  fit {result.name!r} replayed: posterior median and {prediction.draws} draws; "
+        f"residual RMS {prediction.residual_rms_mag:.3f} mag over the window",
+        fontsize=10,
+    )
     return _saved(figure, path)
 
 
@@ -128,9 +235,10 @@ def trace_figure(result, chain=None, path=None):
         axis.plot(steps, chain[::stride, :, i], lw=0.5, alpha=0.5, color="k", antialiased=False)
         axis.axvspan(0, result.discard, color="C1", alpha=0.12, lw=0)
         axis.set_ylabel(result.space.labels[i], fontsize=8)
+    # Wrapped to the figure's width: a verdict of one long line would be cut at the edge.
+    verdict = textwrap.fill(result.verdict.split(". ")[0], 110)
     axes[0].set_title(
-        f"{result.pass_id}: walker traces (burn-in of {result.discard} steps shaded)\n{result.verdict.split('. ')[0]}",
-        fontsize=9,
+        f"{result.pass_id}: walker traces (burn-in of {result.discard} steps shaded)\n{verdict}", fontsize=9
     )
     axes[-1].set_xlabel("step")
     return _saved(figure, path, dpi=90)

@@ -9,13 +9,20 @@ name, result)``). It is built from a sampler run with `FitResult.from_run` and w
     scalar statistics (``offset_mag``, ``jitter_mag``, ``residual_rms_mag``, ``chi2``,
     ``reduced_chi2``, ``dof``), diagnostics (``n_steps``, ``n_walkers``, ``discard``,
     ``converged``, ``verdict``), ``chain_path``, ``elapsed_s``, ``n_evaluations``,
-    ``created_utc``, and JSON strings ``space``, ``config``, ``init``, ``flags``.
+    ``created_utc``, ``epoch_utc`` (reference epoch of the phases), ``selection`` (what the
+    likelihood saw), and JSON strings ``space``, ``config``, ``init``, ``flags``,
+    ``spin_periods`` (`rsodb.fit.conventions`).
 ``summary``
     One row per free parameter: ``name``, ``median``, ``p16``, ``p84``, ``best``,
     ``autocorr_time`` (the paper's Table 1 plus diagnostics).
 ``lightcurve``
-    Per fitted sample: ``time_utc`` (int64 ns since 1970), ``mag_obs``, ``mag_err``,
-    ``mag_model`` (best fit, the marginalised offset applied).
+    Per usable sample of the pass: ``time_utc`` (int64 ns since 1970), ``mag_obs``, ``mag_err``,
+    ``mag_model`` (best fit, the marginalised offset applied), ``in_window`` (inside the fitted
+    window: the residual statistics cover these), ``fitted`` (seen by the likelihood).
+``curve``
+    The model at fine time steps over the whole pass (`rsodb.fit.curves.ModelCurve`):
+    ``time_utc``, ``mag_best``, ``mag_band`` (quantiles over posterior draws, one row per level
+    of the ``levels`` attribute).
 ``samples``
     Up to `MAX_STORED_SAMPLES` posterior draws (after burn-in, thinned evenly), so the
     archive keeps a posterior even if the chain file is removed.
@@ -26,6 +33,9 @@ The summary uses circular statistics for wrapped angles (see
 `ParameterSpace.wrap_samples`): the median is reduced into the prior window and the 16/84
 percentiles are on the same unrolled branch, so ``p16 <= median <= p84`` may exceed the
 window by up to half a period.
+
+Schema 1 records (before the window, the curve and the conventions) are read with every stored
+sample in the window and fitted, no curve and no conventions.
 """
 
 from __future__ import annotations
@@ -39,13 +49,15 @@ from typing import Any
 
 import numpy as np
 
-from rsodb.fit.parameters import KNOWN, ParameterSpace
+from rsodb.fit.curves import ModelCurve, PassCurve
+from rsodb.fit.parameters import ParameterSpace, describe
 from rsodb.fit.sampler import autocorr_time
 from rsodb.storage import attr_text, to_json
 
-__all__ = ["FitResult", "SCHEMA_VERSION", "MAX_STORED_SAMPLES", "assess_convergence"]
+__all__ = ["FitResult", "SCHEMA_VERSION", "MAX_STORED_SAMPLES", "assess_convergence", "best_and_draws"]
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
+READABLE_SCHEMAS = (1, 2)
 MAX_STORED_SAMPLES = 4000
 # emcee's guidance: trust autocorrelation times, and the posterior, when the chain is at
 # least ~50 of them long.
@@ -56,6 +68,20 @@ ACCEPTANCE_RANGE = (0.15, 0.7)
 # A model whose best fit misses the data by more than this many quoted errors (reduced chi2
 # with the observed errors alone) is flagged as not describing them.
 MISFIT_REDUCED_CHI2 = 2.0
+
+
+def best_and_draws(run, space, discard: int | None, count: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """(highest-posterior point (ndim,), `count` random draws (count, ndim)) of a chain run.
+
+    Draws come from the kept part (after `discard`, default half), wrapped angles reduced.
+    """
+    if discard is None:
+        discard = run.burn_in if run.burn_in is not None else run.n_steps // 2
+    best_index = np.unravel_index(np.argmax(run.log_prob), run.log_prob.shape)
+    flat = run.chain[discard:].reshape(-1, space.ndim)
+    rng = np.random.default_rng(seed)
+    picked = flat[rng.choice(flat.shape[0], size=min(count, flat.shape[0]), replace=False)] if count else flat[:0]
+    return space.wrap(run.chain[best_index]), space.wrap(picked)
 
 
 def assess_convergence(n_kept: int, autocorr_time: np.ndarray, acceptance: np.ndarray) -> tuple[bool, str]:
@@ -119,16 +145,20 @@ class FitResult:
     flags : tuple of str
         Warnings for the reader (model misfit, stuck walkers, ...).
     time_utc : (n,) datetime64[ns]
-        Fitted samples.
+        Every usable sample of the pass.
     mag_obs, mag_err, mag_model : (n,) float
         Observed magnitudes and errors, best-fit model with the offset applied.
+    in_window : (n,) bool
+        Inside the fitted window.
+    fitted : (n,) bool
+        Seen by the likelihood (itself or inside a bin).
     offset_mag, jitter_mag : float
         Offset and jitter at the best fit (0 where not fitted).
     residual_rms_mag : float
-        RMS of observed minus best-fit model magnitudes.
+        RMS of observed minus best-fit model magnitudes over every sample of the window.
     chi2, dof : float, int
-        chi2 of the best fit with the observed errors alone, and degrees of freedom
-        (samples - free parameters - offset).
+        chi2 of the best fit with the observed errors alone over every sample of the window,
+        and degrees of freedom (those samples - free parameters - offset).
     samples : (m, ndim) float
         Posterior draws kept in the archive (wrapped angles unrolled).
     chain_path : str
@@ -140,6 +170,14 @@ class FitResult:
     config : mapping
         The configuration that produced the fit.
     created_utc : str
+    curve : ModelCurve or None
+        The model at fine time steps over the pass, with a posterior band.
+    epoch_utc : str
+        Reference epoch of the phases (the fitted window's mid-time), ISO UTC.
+    spin_periods : mapping
+        The spin period in each convention (`rsodb.fit.conventions.spin_periods`).
+    selection : str
+        What the likelihood saw, in words.
     """
 
     pass_id: str
@@ -175,6 +213,12 @@ class FitResult:
     init: Mapping[str, Any] = field(default_factory=dict)
     config: Mapping[str, Any] = field(default_factory=dict)
     created_utc: str = ""
+    in_window: np.ndarray | None = None
+    fitted: np.ndarray | None = None
+    curve: ModelCurve | None = None
+    epoch_utc: str = ""
+    spin_periods: Mapping[str, Any] = field(default_factory=dict)
+    selection: str = ""
 
     def __post_init__(self):
         for name in (
@@ -196,6 +240,11 @@ class FitResult:
         times.setflags(write=False)
         object.__setattr__(self, "time_utc", times)
         object.__setattr__(self, "flags", tuple(self.flags))
+        for name in ("in_window", "fitted"):
+            value = getattr(self, name)
+            value = np.ones(times.size, dtype=bool) if value is None else np.array(value, dtype=bool)
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
 
     # -- views ------------------------------------------------------------------------------
     @property
@@ -209,13 +258,23 @@ class FitResult:
 
     @property
     def residuals_mag(self) -> np.ndarray:
-        """(n,) observed minus best-fit model."""
+        """(n,) observed minus best-fit model, every stored sample."""
         return self.mag_obs - self.mag_model
 
     @property
     def t_s(self) -> np.ndarray:
-        """(n,) seconds since the first fitted sample."""
+        """(n,) seconds since the first stored sample (the pass's first usable sample)."""
         return (self.time_utc - self.time_utc[0]) / np.timedelta64(1, "s")
+
+    @property
+    def window_utc(self) -> tuple[np.datetime64, np.datetime64]:
+        """First and last sample of the fitted window."""
+        times = self.time_utc[self.in_window]
+        return times[0], times[-1]
+
+    @property
+    def n_window(self) -> int:
+        return int(np.sum(self.in_window))
 
     def values(self, which: str = "median") -> dict[str, float]:
         """``{name: value}`` of `which` (``median``, ``best``, ``p16``, ``p84``) plus fixed values."""
@@ -226,23 +285,51 @@ class FitResult:
         return values
 
     def table(self) -> str:
-        """The posterior as a text table: median with -/+ errors per parameter."""
-        rows = [f"{'parameter':<22} {'median':>12} {'-err':>10} {'+err':>10}   best"]
+        """The posterior as a text table: median with -/+ errors per parameter, then the spin
+        period in every convention, the fit's statistics and verdicts."""
+        rows = []
+        if self.epoch_utc:
+            rows.append(f"phases at the reference epoch {self.epoch_utc} UTC (the fitted window's mid-time)")
+        if self.selection:
+            rows.append(f"fitted: {self.selection}")
+        rows.append(f"{'parameter':<22} {'median':>12} {'-err':>10} {'+err':>10}   best")
         for i, name in enumerate(self.names):
-            unit = KNOWN[name].unit
+            unit = describe(name).unit
             rows.append(
                 f"{name:<22} {self.median[i]:12.5g} {self.median[i] - self.p16[i]:10.3g} "
                 f"{self.p84[i] - self.median[i]:10.3g}   {self.best[i]:.5g} {unit}"
             )
         for name, value in self.space.fixed.items():
             rows.append(f"{name:<22} {value:12.5g} {'(fixed)':>10}")
+        rows.extend(self.spin_period_lines())
         rows.append(
-            f"residual RMS {self.residual_rms_mag:.3f} mag, reduced chi2 {self.reduced_chi2:.2f} "
-            f"(observed errors), jitter {self.jitter_mag:.3f} mag, offset {self.offset_mag:+.3f} mag"
+            f"residual RMS {self.residual_rms_mag:.3f} mag over all {self.n_window} samples of the window, "
+            f"reduced chi2 {self.reduced_chi2:.2f} (observed errors), jitter {self.jitter_mag:.3f} mag, "
+            f"offset {self.offset_mag:+.3f} mag"
         )
         rows.append(self.verdict)
         rows.extend(f"warning: {flag}" for flag in self.flags)
         return "\n".join(rows)
+
+    def spin_period_lines(self) -> list[str]:
+        """The spin period in each convention (`rsodb.fit.conventions`), one line each."""
+        conventions = dict(self.spin_periods).get("conventions", {})
+        if not conventions:
+            return []
+        definitions = self.spin_periods.get("definitions", {})
+        lines = ["spin period by convention (median, 16-84%):"]
+        for name, value in conventions.items():
+            lines.append(
+                f"  {name:<12} {value['median']:.6g} s ({value['p16']:.6g}-{value['p84']:.6g})  "
+                f"{definitions.get(name, '')}"
+            )
+        if self.spin_periods.get("periodogram_period_s") is not None:
+            lines.append(
+                f"  periodogram  {self.spin_periods['periodogram_period_s']:.6g} s "
+                f"(+-{self.spin_periods['periodogram_uncertainty_s']:.2g}): the stored period, "
+                "to compare with light_curve"
+            )
+        return lines
 
     def to_dict(self) -> dict:
         """JSON-friendly summary (no per-sample arrays)."""
@@ -267,7 +354,11 @@ class FitResult:
             "chi2": self.chi2,
             "dof": self.dof,
             "reduced_chi2": self.reduced_chi2,
-            "n_samples": int(self.mag_obs.size),
+            "n_samples": self.n_window,
+            "n_fitted": int(np.sum(self.fitted)),
+            "selection": self.selection,
+            "epoch_utc": self.epoch_utc,
+            "spin_periods": dict(self.spin_periods),
             "n_steps": self.n_steps,
             "n_walkers": self.n_walkers,
             "discard": self.discard,
@@ -278,7 +369,7 @@ class FitResult:
             "chain_path": self.chain_path,
             "elapsed_s": self.elapsed_s,
             "n_evaluations": self.n_evaluations,
-            "start_utc": str(self.time_utc[0]),
+            "start_utc": str(self.window_utc[0]),
             "created_utc": self.created_utc,
         }
 
@@ -294,6 +385,11 @@ class FitResult:
         time_utc,
         discard: int | None = None,
         config: Mapping | None = None,
+        pass_curve: PassCurve | None = None,
+        model_curve: ModelCurve | None = None,
+        epoch_utc: str = "",
+        spin_periods: Mapping | None = None,
+        selection: str = "",
     ) -> FitResult:
         """Summarise a `ChainRun` of `posterior`.
 
@@ -304,15 +400,25 @@ class FitResult:
             The posterior that was sampled (for the best-fit light curve).
         pass_id, name : str
         time_utc : (n,) datetime64
-            Times of the fitted samples.
+            Times of the likelihood's samples (used when `pass_curve` is not given).
         discard : int, optional
             Burn-in steps to drop; default half the chain.
         config : mapping, optional
             The fit configuration, stored for provenance.
+        pass_curve : PassCurve, optional
+            Every usable sample of the pass with the best fit (`rsodb.fit.curves.pass_curves`):
+            then the residual statistics cover every sample of the window. Without it they cover
+            the likelihood's samples.
+        model_curve : ModelCurve, optional
+        epoch_utc, selection : str
+        spin_periods : mapping, optional
+            `rsodb.fit.conventions.spin_periods`.
         """
         space = posterior.space
         n_steps = run.n_steps
-        discard = n_steps // 2 if discard is None else int(discard)
+        if discard is None:
+            discard = run.burn_in if run.burn_in is not None else n_steps // 2
+        discard = int(discard)
         if not 0 <= discard < n_steps:
             raise ValueError(f"discard={discard} must be within 0..{n_steps - 1} (the chain has {n_steps} steps)")
         kept = run.chain[discard:]
@@ -329,15 +435,27 @@ class FitResult:
         jitter = float(values.get("jitter_mag", 0.0))
         model_mag = posterior.model.magnitudes(values)
         offset = likelihood.offset_mag(model_mag, jitter)
-        mag_model = model_mag + offset
-        residuals = likelihood.mag_obs - mag_model
-        chi2 = float(np.sum((residuals / likelihood.mag_err) ** 2))
+        if pass_curve is None:
+            pass_curve = PassCurve(
+                time_utc,
+                likelihood.mag_obs,
+                likelihood.mag_err,
+                model_mag + offset,
+                np.ones(model_mag.size, dtype=bool),
+                np.ones(model_mag.size, dtype=bool),
+            )
+        window = pass_curve.in_window
+        residuals = (pass_curve.mag_obs - pass_curve.mag_model)[window]
+        errors = pass_curve.mag_err[window]
+        chi2 = float(np.sum((residuals / errors) ** 2))
         dof = int(residuals.size - space.ndim - likelihood.n_free_nuisance)
 
         converged, verdict = assess_convergence(kept.shape[0], tau, run.acceptance_fraction)
+        if run.stopped:
+            verdict = f"{verdict} ({run.stopped})"
         flags = []
         if likelihood.kind == "gaussian" and dof > 0 and chi2 / dof > MISFIT_REDUCED_CHI2:
-            median_err = float(np.median(likelihood.mag_err))
+            median_err = float(np.median(errors))
             flags.append(
                 f"model misfit: the best fit leaves residuals of RMS {np.sqrt(np.mean(residuals**2)):.3f} mag "
                 f"against a median quoted error of {median_err:.3f} mag (reduced chi2 {chi2 / dof:.1f}); "
@@ -377,10 +495,10 @@ class FitResult:
             converged=converged,
             verdict=verdict,
             flags=tuple(flags),
-            time_utc=time_utc,
-            mag_obs=likelihood.mag_obs,
-            mag_err=likelihood.mag_err,
-            mag_model=mag_model,
+            time_utc=pass_curve.time_utc,
+            mag_obs=pass_curve.mag_obs,
+            mag_err=pass_curve.mag_err,
+            mag_model=pass_curve.mag_model,
             offset_mag=float(offset),
             jitter_mag=jitter,
             residual_rms_mag=float(np.sqrt(np.mean(residuals**2))),
@@ -393,6 +511,12 @@ class FitResult:
             init=dict(run.init),
             config=dict(config or {}),
             created_utc=datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
+            in_window=pass_curve.in_window,
+            fitted=pass_curve.fitted,
+            curve=model_curve,
+            epoch_utc=str(epoch_utc),
+            spin_periods=dict(spin_periods or {}),
+            selection=selection,
         )
 
     # -- HDF5 ---------------------------------------------------------------------------------
@@ -413,6 +537,9 @@ class FitResult:
         attrs["config"] = to_json(self.config, sort_keys=True)
         attrs["init"] = to_json(self.init, sort_keys=True)
         attrs["flags"] = to_json(list(self.flags), sort_keys=True)
+        attrs["epoch_utc"] = self.epoch_utc
+        attrs["selection"] = self.selection
+        attrs["spin_periods"] = to_json(dict(self.spin_periods), sort_keys=True)
         width = max(len(n) for n in self.names)
         summary = np.zeros(
             len(self.names),
@@ -430,11 +557,26 @@ class FitResult:
             summary[key] = getattr(self, key)
         group.create_dataset("summary", data=summary)
         curve = np.zeros(
-            self.mag_obs.size, dtype=[("time_utc", "i8"), ("mag_obs", "f8"), ("mag_err", "f8"), ("mag_model", "f8")]
+            self.mag_obs.size,
+            dtype=[
+                ("time_utc", "i8"),
+                ("mag_obs", "f8"),
+                ("mag_err", "f8"),
+                ("mag_model", "f8"),
+                ("in_window", "?"),
+                ("fitted", "?"),
+            ],
         )
         curve["time_utc"] = self.time_utc.view("i8")
         curve["mag_obs"], curve["mag_err"], curve["mag_model"] = self.mag_obs, self.mag_err, self.mag_model
+        curve["in_window"], curve["fitted"] = self.in_window, self.fitted
         group.create_dataset("lightcurve", data=curve, compression="gzip")
+        if self.curve is not None:
+            fine = group.create_group("curve")
+            fine.attrs["levels"] = np.asarray(self.curve.levels, dtype=float)
+            fine.create_dataset("time_utc", data=self.curve.time_utc.view("i8"), compression="gzip")
+            fine.create_dataset("mag_best", data=self.curve.mag_best, compression="gzip")
+            fine.create_dataset("mag_band", data=self.curve.mag_band, compression="gzip")
         group.create_dataset("samples", data=self.samples, compression="gzip")
         group.create_dataset("acceptance_fraction", data=self.acceptance_fraction)
 
@@ -443,10 +585,10 @@ class FitResult:
         """Read what `to_hdf5` wrote."""
         attrs = group.attrs
         version = int(attrs.get("schema_version", -1))
-        if version != SCHEMA_VERSION:
+        if version not in READABLE_SCHEMAS:
             raise ValueError(
                 f"fit record {group.name} has schema_version {version}; this rsodb reads "
-                f"{SCHEMA_VERSION} (refit the pass or upgrade rsodb)"
+                f"{', '.join(map(str, READABLE_SCHEMAS))} (refit the pass or upgrade rsodb)"
             )
 
         def text(key):
@@ -454,6 +596,16 @@ class FitResult:
 
         summary = group["summary"][...]
         curve = group["lightcurve"][...]
+        names = curve.dtype.names
+        model_curve = None
+        if "curve" in group:
+            fine = group["curve"]
+            model_curve = ModelCurve(
+                fine["time_utc"][...].view("datetime64[ns]"),
+                fine["mag_best"][...],
+                np.asarray(fine.attrs["levels"], dtype=float),
+                fine["mag_band"][...],
+            )
         return cls(
             pass_id=text("pass_id"),
             name=text("name"),
@@ -488,4 +640,10 @@ class FitResult:
             init=json.loads(text("init")),
             config=json.loads(text("config")),
             created_utc=text("created_utc"),
+            in_window=curve["in_window"] if "in_window" in names else None,
+            fitted=curve["fitted"] if "fitted" in names else None,
+            curve=model_curve,
+            epoch_utc=text("epoch_utc") if "epoch_utc" in attrs else "",
+            spin_periods=json.loads(text("spin_periods")) if "spin_periods" in attrs else {},
+            selection=text("selection") if "selection" in attrs else "",
         )

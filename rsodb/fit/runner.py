@@ -3,7 +3,8 @@
 ``fit_pass(archive, pass_id, config)`` is the whole job for one stored pass: it reads the pass
 and its stored period, runs the sampler with the chain at ``archive.chain_path(pass_id,
 config.name)`` (so a killed fit resumes when run again), and stores the `FitResult` with
-``archive.store_result(pass_id, "fits", config.name, result)``.
+``archive.store_result(pass_id, "fits", config.name, result)``. Shape caches are kept beside the
+archive (`shape_store_for`), built by the first fit that needs one.
 
 The pieces are separate for campaigns, where workers compute and the client stores:
 `FitProblem.build` (data + posterior, no archive), `fit_problem` (sample + summarise).
@@ -11,24 +12,42 @@ The pieces are separate for campaigns, where workers compute and the client stor
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 
-from raycast.geometry.pass_geometry import PassGeometry
+from raycast.geometry.pass_geometry import choose_n_sub
 from rsodb.fit.config import FitConfig
+from rsodb.fit.conventions import spin_periods
+from rsodb.fit.curves import geometry_at, pass_curves
 from rsodb.fit.likelihood import make_likelihood
 from rsodb.fit.model import SpinStateModel
 from rsodb.fit.posterior import Posterior
-from rsodb.fit.result import FitResult
+from rsodb.fit.result import FitResult, best_and_draws
 from rsodb.fit.sampler import run_sampler
-from rsodb.fit.shapes import MATERIAL_PARAMETERS, SHAPES, brightness_for, shape_for_norad
+from rsodb.fit.selection import Selection, select_samples
+from rsodb.fit.shape_store import ShapeStore
+from rsodb.fit.shapes import MATERIAL_PARAMETERS, Shape, brightness_for, resolve_shape
 from rsodb.periods.search import PeriodResult
 
-__all__ = ["FitProblem", "select_samples", "fit_problem", "fit_pass", "load_periods", "reference_range_km"]
+__all__ = [
+    "FitProblem",
+    "fit_problem",
+    "fit_pass",
+    "load_periods",
+    "reference_range_km",
+    "shape_store_for",
+    "spin_period_bounds",
+    "SEARCH_BIN_TURN_DEG",
+]
 
 # Where the stored period lives (written by `rsodb periods`).
 PERIODS_RESULT_NAME = "default"
+# The global search may bin samples more coarsely than the fit: it only has to find the mode.
+SEARCH_BIN_TURN_DEG = 30.0
+# Posterior draws behind the spin period's conventions.
+CONVENTION_DRAWS = 200
 
 
 def reference_range_km(observed) -> float | None:
@@ -36,44 +55,43 @@ def reference_range_km(observed) -> float | None:
     return 1000.0 if "reduced to 1000 km" in (observed.mag_convention or "") else None
 
 
-def select_samples(observed, data) -> np.ndarray:
-    """(n,) bool: the samples of `observed` to fit under `data` (a `DataConfig`).
+def shape_store_for(archive) -> ShapeStore:
+    """The shape caches of an archive: ``<archive>/shapes/``."""
+    return ShapeStore(Path(archive.path) / "shapes")
 
-    Valid, finite magnitudes with finite errors, not saturated unless asked, inside the time
-    window, every ``stride``-th, then at most ``max_points`` of those, evenly spread.
-    """
-    mag = observed.best_mag
-    keep = observed.valid & np.isfinite(mag) & np.isfinite(observed.mag_err)
-    if not data.keep_saturated:
-        keep &= ~observed.saturated
-    t_s = observed.t_s
-    keep &= t_s >= data.start_s
-    if data.duration_s > 0:
-        keep &= t_s <= data.start_s + data.duration_s
-    index = np.flatnonzero(keep)[:: data.stride]
-    if data.max_points and index.size > data.max_points:
-        index = index[np.unique(np.linspace(0, index.size - 1, data.max_points).round().astype(int))]
-    chosen = np.zeros(len(observed), dtype=bool)
-    chosen[index] = True
-    return chosen
+
+def spin_period_bounds(space) -> tuple[float, float]:
+    """(fastest, slowest) spin period a parameter space allows (its prior's support, or the fixed value)."""
+    if "spin_period_s" in space.fixed:
+        value = abs(space.fixed["spin_period_s"])
+        return value, value
+    low, high = next(p.prior.bounds for p in space.free if p.name == "spin_period_s")
+    return abs(low), abs(high)
 
 
 @dataclass(frozen=True, eq=False)
 class FitProblem:
-    """A posterior ready to sample, with what is needed to store its result.
+    """A posterior ready to sample, with what is needed to summarise and store its result.
 
     Attributes
     ----------
     pass_id : str
     config : FitConfig
     shape : str
-        The shape actually used (``auto`` resolved).
+        The shape actually used (``auto`` resolved; ``mesh:NAME`` for a mesh file).
     posterior : Posterior
-    time_utc : (n,) datetime64[ns]
-        The fitted samples.
+    time_utc : (m,) datetime64[ns]
+        The likelihood's samples (bin mid-times when binned).
     search_posterior : Posterior
-        The same posterior on at most ``config.sampler.search_points`` samples without
-        exposure sub-samples, for the global search that starts the walkers.
+        The same posterior on at most ``config.sampler.search_points`` samples (bins and
+        contiguous windows, never a stride) with one exposure sub-sample, for the global
+        search that starts the walkers.
+    observed : Pass
+    selection : Selection
+    epoch_utc : datetime64[ns]
+        Reference epoch of the phases: the fitted window's mid-time.
+    search_selection : str
+        What the search saw, in words.
     """
 
     pass_id: str
@@ -82,9 +100,22 @@ class FitProblem:
     posterior: Posterior
     time_utc: np.ndarray
     search_posterior: Posterior
+    observed: object = None
+    selection: Selection | None = None
+    epoch_utc: np.datetime64 | None = None
+    search_selection: str = ""
 
     @classmethod
-    def build(cls, observed, config: FitConfig, periods=None, *, progress: bool = False) -> FitProblem:
+    def build(
+        cls,
+        observed,
+        config: FitConfig,
+        periods=None,
+        *,
+        progress: bool = False,
+        store: ShapeStore | None = None,
+        shape: tuple[str, Shape] | None = None,
+    ) -> FitProblem:
         """Data selection, geometry, shape, priors and likelihood for one pass.
 
         Parameters
@@ -96,35 +127,36 @@ class FitProblem:
             The pass's stored period (for the default spin-period prior).
         progress : bool
             Progress bar while a shape cache is built.
+        store : ShapeStore, optional
+            Where shape caches are kept (default: this process's memory).
+        shape : (name, Shape), optional
+            Overrides the configuration's shape (e.g. a scene built in code).
         """
         pass_id = getattr(observed, "pass_id", "") or observed.source_name
-        chosen = select_samples(observed, config.data)
-        n = int(chosen.sum())
-        if n < 10:
-            raise ValueError(
-                f"pass {pass_id}: only {n} usable samples in the chosen window; a fit needs at least 10 "
-                "(check [data] start_s/duration_s/stride, or keep_saturated)"
-            )
-        shape = shape_for_norad(observed.norad) if config.model.shape == "auto" else config.model.shape
-        space = config.parameter_space(SHAPES[shape].articulations, periods)
-        brightness_names = set(SHAPES[shape].articulations) | set(MATERIAL_PARAMETERS)
+        shape_name, shape_spec = shape or resolve_shape(config.model, observed.norad)
+        space = config.parameter_space(shape_spec.articulations, periods)
+        bounds = spin_period_bounds(space)
+        selection = select_samples(observed, config.data, bounds, pass_id)
+        brightness_names = set(shape_spec.articulations) | set(MATERIAL_PARAMETERS)
         free_bounds = {p.name: p.prior.bounds for p in space.free if p.name in brightness_names}
         fixed = {k: v for k, v in space.fixed.items() if k in brightness_names}
         brightness, brightness_parameters = brightness_for(
-            shape,
+            shape_spec,
             free_bounds,
             fixed,
             renderer=config.model.renderer,
             accuracy_mag=config.model.accuracy_mag,
             progress=progress,
+            store=store,
+            name=shape_name,
         )
-        # The fastest spin the prior allows sets the exposure sub-sampling (2 deg per sub-sample).
-        period_guess = dict(space.fixed, **{p.name: p.prior.low for p in space.free}).get("spin_period_s")
+        window_times = observed.time_utc[selection.window]
+        epoch_utc = window_times[0] + (window_times[-1] - window_times[0]) // 2
 
-        def posterior_on(index: np.ndarray, n_sub: int | None) -> Posterior:
-            geometry = PassGeometry.from_pass(
-                observed, n_sub=n_sub, spin_period_s=period_guess if period_guess else None, samples=index
-            )
+        def posterior_on(chosen: Selection, n_sub: int | None) -> Posterior:
+            # The fastest spin the prior allows sets the exposure sub-sampling (2 deg per sub-sample).
+            geometry = geometry_at(observed, chosen.time_utc(observed), chosen.exposure_s(observed), n_sub, bounds[0])
+            epoch_s = float((epoch_utc - geometry.time_utc[0]) / np.timedelta64(1, "s"))
             model = SpinStateModel(
                 geometry,
                 brightness,
@@ -133,44 +165,108 @@ class FitProblem:
                 brightness_parameters,
                 observed.band,
                 reference_range_km(observed),
+                epoch_s,
             )
-            err = np.maximum(observed.mag_err[index], config.data.mag_err_floor)
-            likelihood = make_likelihood(
-                config.likelihood.kind, observed.best_mag[index], err, config.likelihood.offset
-            )
+            mag, err = chosen.magnitudes(observed, config.data.mag_err_floor)
+            likelihood = make_likelihood(config.likelihood.kind, mag, err, config.likelihood.offset)
             return Posterior(space, model, likelihood)
 
-        index = np.flatnonzero(chosen)
-        posterior = posterior_on(index, config.model.n_sub or None)
-        coarse = index[np.unique(np.linspace(0, n - 1, min(n, config.sampler.search_points)).round().astype(int))]
-        search_posterior = (
-            posterior_on(coarse, 1) if coarse.size < n or posterior.model.geometry.n_sub > 1 else posterior
+        posterior = posterior_on(selection, config.model.n_sub or None)
+        search_data = replace(
+            config.data,
+            max_points=config.sampler.search_points,
+            bin_turn_deg=max(config.data.bin_turn_deg, SEARCH_BIN_TURN_DEG),
+            windows=0,
         )
-        return cls(pass_id, config, shape, posterior, observed.time_utc[chosen], search_posterior)
+        try:
+            coarse = select_samples(observed, search_data, bounds, pass_id)
+        except ValueError:
+            # Too few points to cover the phase in contiguous windows: the search sees what the fit sees.
+            coarse = selection
+        if coarse.n >= selection.n and posterior.model.geometry.n_sub == 1:
+            search_posterior = posterior
+        else:
+            search_posterior = posterior_on(coarse, 1)
+        return cls(
+            pass_id,
+            config,
+            shape_name,
+            posterior,
+            selection.time_utc(observed),
+            search_posterior,
+            observed,
+            selection,
+            epoch_utc,
+            coarse.description,
+        )
+
+    def curve_n_sub(self) -> int:
+        """Exposure sub-samples of the pass-wide curves: the fit's, or chosen for one sample's exposure."""
+        if self.config.model.n_sub:
+            return self.config.model.n_sub
+        fastest = spin_period_bounds(self.posterior.space)[0]
+        return choose_n_sub(self.observed.exposure_s, fastest)
+
+    def summarise(self, run, periods=None) -> FitResult:
+        """The `FitResult` of a sampler run of this problem: residuals over the whole window, the
+        model curve and band over the whole pass, the spin period in every convention."""
+        config = self.config
+        space = self.posterior.space
+        best, draws = best_and_draws(
+            run, space, config.discard, max(config.band_draws, CONVENTION_DRAWS), config.sampler.seed
+        )
+        fastest = spin_period_bounds(space)[0]
+        pass_curve, model_curve = pass_curves(
+            self.posterior,
+            self.observed,
+            self.selection,
+            best,
+            draws[: config.band_draws],
+            n_sub=self.curve_n_sub(),
+            fastest_period_s=fastest,
+        )
+        window = self.observed.time_utc[self.selection.window]
+        periods_record = spin_periods(
+            self.posterior.model,
+            space,
+            draws[:CONVENTION_DRAWS],
+            self.observed,
+            (window[0], window[-1]),
+            config.model.attitude,
+            config.model.spin_axis,
+            periods,
+        )
+        record = dict(config.to_dict(), shape=self.shape)
+        return FitResult.from_run(
+            run,
+            self.posterior,
+            pass_id=self.pass_id,
+            name=config.name,
+            time_utc=self.time_utc,
+            discard=config.discard,
+            config=record,
+            pass_curve=pass_curve,
+            model_curve=model_curve,
+            epoch_utc=np.datetime_as_string(self.epoch_utc, unit="ms"),
+            spin_periods=periods_record,
+            selection=self.selection.description,
+        )
 
 
-def fit_problem(problem: FitProblem, chain_path, *, restart: bool = False, progress: bool = True) -> FitResult:
+def fit_problem(
+    problem: FitProblem, chain_path, *, restart: bool = False, progress: bool = True, periods=None
+) -> FitResult:
     """Sample a prepared problem (chain at `chain_path`, resumed when present) and summarise it."""
-    config = problem.config
     run = run_sampler(
         problem.posterior,
-        config.sampler,
+        problem.config.sampler,
         chain_path,
         restart=restart,
         progress=progress,
         description=f"fit {problem.pass_id}",
         search_posterior=problem.search_posterior,
     )
-    record = dict(config.to_dict(), shape=problem.shape)
-    return FitResult.from_run(
-        run,
-        problem.posterior,
-        pass_id=problem.pass_id,
-        name=config.name,
-        time_utc=problem.time_utc,
-        discard=config.discard,
-        config=record,
-    )
+    return problem.summarise(run, periods)
 
 
 def load_periods(archive, pass_id: str):
@@ -178,11 +274,6 @@ def load_periods(archive, pass_id: str):
     if PERIODS_RESULT_NAME not in archive.result_names(pass_id, "periods"):
         return None
     return archive.load_result(pass_id, "periods", PERIODS_RESULT_NAME, PeriodResult.from_hdf5)
-
-
-def _needs_periods(config: FitConfig) -> bool:
-    spec = config.parameter_specs({}).get("spin_period_s")
-    return isinstance(spec, dict) and spec.get("from") == "periods"
 
 
 def fit_pass(
@@ -219,10 +310,12 @@ def fit_pass(
     """
     config = config or FitConfig()
     observed = archive.get(pass_id)
-    if periods is None and _needs_periods(config):
+    if periods is None:
         periods = load_periods(archive, observed.pass_id)
-    problem = FitProblem.build(observed, config, periods, progress=progress)
-    result = fit_problem(problem, archive.chain_path(observed.pass_id, config.name), restart=restart, progress=progress)
+    problem = FitProblem.build(observed, config, periods, progress=progress, store=shape_store_for(archive))
+    result = fit_problem(
+        problem, archive.chain_path(observed.pass_id, config.name), restart=restart, progress=progress, periods=periods
+    )
     if store:
         archive.store_result(observed.pass_id, "fits", config.name, result)
     return result

@@ -16,6 +16,10 @@
 - a fixed `seed` reproduces a run exactly (initial positions, the search and emcee's moves).
 - with ``processes > 1`` the log posterior runs in a ``multiprocessing`` pool whose workers
   receive the posterior once, at start-up, rather than with every batch of walkers.
+- ``until_converged=True`` runs until the chain after its burn-in (`BURN_IN_TAUS`
+  autocorrelation times) is `CONVERGED_TAUS` autocorrelation times long on every parameter, with
+  the estimates steady, checked every ``check_every`` steps; ``n_steps`` then caps the length.
+  ``time_limit_s`` stops any run when its time is up. `ChainRun.stopped` says why a run ended.
 """
 
 from __future__ import annotations
@@ -39,12 +43,27 @@ import numpy as np
 from scipy.optimize import differential_evolution, minimize
 from tqdm.auto import tqdm
 
-__all__ = ["SamplerSettings", "ChainRun", "run_sampler", "INITIALISERS", "read_chain"]
+__all__ = [
+    "SamplerSettings",
+    "ChainRun",
+    "run_sampler",
+    "INITIALISERS",
+    "read_chain",
+    "convergence_check",
+    "CONVERGED_TAUS",
+    "BURN_IN_TAUS",
+]
 
 CHAIN_GROUP = "mcmc"
 _SINGLE_THREAD_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 # Stand-in for -ln p where the posterior is zero, for the minimiser (it needs finite values).
 _IMPOSSIBLE = 1e30
+# emcee's guidance: trust the autocorrelation time, and the posterior, when the chain after
+# burn-in is at least ~50 of them long; burn-in takes a few of them.
+CONVERGED_TAUS = 50
+BURN_IN_TAUS = 5
+# Autocorrelation estimates counted as steady when they moved by less than this between checks.
+_STEADY = 0.1
 
 
 @dataclass(frozen=True)
@@ -85,6 +104,13 @@ class SamplerSettings:
         Seed of every random choice of the run.
     checkpoint_every : int
         Steps between atomic backup copies of the chain file.
+    until_converged : bool
+        Stop as soon as the chain is converged (`convergence_check`), at most ``n_steps`` steps.
+    check_every : int
+        Steps between convergence checks.
+    time_limit_s : float
+        Stop sampling when this much time has passed since the run started (0: no limit); the
+        chain so far is kept and a rerun continues it.
     """
 
     n_walkers: int = 20
@@ -99,9 +125,20 @@ class SamplerSettings:
     processes: int = 1
     seed: int = 0
     checkpoint_every: int = 50
+    until_converged: bool = False
+    check_every: int = 100
+    time_limit_s: float = 0.0
 
     def __post_init__(self):
-        for name in ("n_walkers", "n_steps", "search_maxiter", "search_popsize", "search_points", "checkpoint_every"):
+        for name in (
+            "n_walkers",
+            "n_steps",
+            "search_maxiter",
+            "search_popsize",
+            "search_points",
+            "checkpoint_every",
+            "check_every",
+        ):
             value = getattr(self, name)
             if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or value < 1:
                 raise ValueError(f"sampler setting {name}={value!r} must be a positive integer")
@@ -117,6 +154,12 @@ class SamplerSettings:
             raise ValueError(f"sampler setting seed={self.seed!r} must be a non-negative integer")
         if not (0 < self.ball_fraction < 1):
             raise ValueError(f"sampler setting ball_fraction={self.ball_fraction!r} must be in (0, 1)")
+        if not isinstance(self.until_converged, bool):
+            raise ValueError(f"sampler setting until_converged={self.until_converged!r} must be true or false")
+        if not (
+            isinstance(self.time_limit_s, (int, float)) and math.isfinite(self.time_limit_s) and self.time_limit_s >= 0
+        ):
+            raise ValueError(f"sampler setting time_limit_s={self.time_limit_s!r} must be seconds >= 0 (0: no limit)")
 
     @property
     def n_processes(self) -> int:
@@ -162,6 +205,10 @@ class ChainRun:
         How walkers were started (method, search best value, evaluations).
     chain_path : str
         The HDFBackend file.
+    stopped : str
+        Why sampling ended, in words ("" after the planned steps).
+    burn_in : int or None
+        Burn-in the convergence check settled on (``until_converged`` runs), else None.
     """
 
     names: tuple[str, ...]
@@ -174,6 +221,8 @@ class ChainRun:
     elapsed_s: float
     init: Mapping[str, Any]
     chain_path: str
+    stopped: str = ""
+    burn_in: int | None = None
 
     @property
     def n_steps(self) -> int:
@@ -511,6 +560,27 @@ def read_chain(chain_path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarr
     return backend.get_chain(), backend.get_log_prob(), backend.accepted / max(iteration, 1)
 
 
+def convergence_check(chain: np.ndarray, previous_tau: np.ndarray | None = None) -> tuple[bool, int, np.ndarray]:
+    """(converged, burn-in steps, tau per parameter) of a (steps, walkers, ndim) chain.
+
+    The burn-in is `BURN_IN_TAUS` times the longest autocorrelation time (measured on the
+    second half, never more than half the chain); tau is then measured after the burn-in.
+    Converged when the kept chain is `CONVERGED_TAUS` times the longest tau on every parameter
+    and, given `previous_tau`, no tau moved by more than 10% since.
+    """
+    steps = chain.shape[0]
+    first = autocorr_time(chain[steps // 2 :])
+    longest = float(np.nanmax(first)) if np.any(np.isfinite(first)) else math.inf
+    burn = int(min(steps // 2, math.ceil(BURN_IN_TAUS * longest))) if math.isfinite(longest) else steps // 2
+    tau = autocorr_time(chain[burn:])
+    if not np.all(np.isfinite(tau)):
+        return False, burn, tau
+    converged = steps - burn >= CONVERGED_TAUS * float(np.max(tau))
+    if previous_tau is not None and np.all(np.isfinite(previous_tau)):
+        converged &= bool(np.all(np.abs(tau - previous_tau) <= _STEADY * tau))
+    return bool(converged), burn, tau
+
+
 # -- the entry point ------------------------------------------------------------------------
 def run_sampler(
     posterior,
@@ -560,6 +630,7 @@ def run_sampler(
     stored = _prepare_chain_file(chain_path, identity, restart)
     remaining = max(settings.n_steps - stored, 0)
     init_info: dict = {"method": "resumed" if stored else settings.init}
+    stopped, burn_in = "", None
 
     backend = emcee.backends.HDFBackend(str(chain_path), name=CHAIN_GROUP)
     search_posterior = posterior if search_posterior is None else search_posterior
@@ -600,13 +671,13 @@ def run_sampler(
                 state = None  # continue from the backend's last step and random state
         if remaining:
             start = state if state is not None else backend.get_last_sample()
-            with tqdm(
-                total=settings.n_steps, initial=stored, desc=description, unit="step", disable=not progress, leave=False
-            ) as bar:
-                for i, _ in enumerate(sampler.sample(start, iterations=remaining), start=stored + 1):
-                    bar.update(1)
-                    if i % settings.checkpoint_every == 0 or i == settings.n_steps:
-                        _atomic_copy(chain_path, _backup_path(chain_path))
+            stopped, burn_in, steps_done = _sample(
+                sampler, start, remaining, stored, settings, chain_path, started, description, progress
+            )
+            remaining = steps_done
+        elif settings.until_converged:
+            converged, burn_in, _ = convergence_check(backend.get_chain())
+            stopped = "" if converged else f"the step limit ({settings.n_steps}) was already reached"
     finally:
         if pool is not None:
             pool.close()
@@ -624,7 +695,40 @@ def run_sampler(
         elapsed,
         init_info,
         str(chain_path),
+        stopped,
+        burn_in,
     )
+
+
+def _sample(sampler, start, remaining, stored, settings, chain_path, started, description, progress):
+    """Take up to `remaining` steps; (why it stopped, burn-in or None, steps taken)."""
+    stopped, burn_in, previous_tau, taken = "", None, None, 0
+    with tqdm(
+        total=settings.n_steps, initial=stored, desc=description, unit="step", disable=not progress, leave=False
+    ) as bar:
+        for i, _ in enumerate(sampler.sample(start, iterations=remaining), start=stored + 1):
+            bar.update(1)
+            taken += 1
+            if i % settings.checkpoint_every == 0 or i == settings.n_steps:
+                _atomic_copy(chain_path, _backup_path(chain_path))
+            if settings.until_converged and i % settings.check_every == 0:
+                converged, burn_in, tau = convergence_check(sampler.get_chain(), previous_tau)
+                previous_tau = tau
+                if converged:
+                    _atomic_copy(chain_path, _backup_path(chain_path))
+                    stopped = (
+                        f"stopped converged after {i} steps: {i - burn_in} steps after a burn-in of {burn_in} are "
+                        f"{(i - burn_in) / np.max(tau):.0f} autocorrelation times (tau up to {np.max(tau):.0f} steps)"
+                    )
+                    break
+            if settings.time_limit_s and time.perf_counter() - started >= settings.time_limit_s:
+                _atomic_copy(chain_path, _backup_path(chain_path))
+                stopped = f"stopped at the time limit of {settings.time_limit_s:.0f} s after {i} steps"
+                break
+    if settings.until_converged and not stopped.startswith("stopped converged"):
+        _, burn_in, _ = convergence_check(sampler.get_chain())
+        stopped = stopped or f"stopped at the step limit of {settings.n_steps} steps before converging"
+    return stopped, burn_in, taken
 
 
 def autocorr_time(chain):

@@ -1,14 +1,17 @@
 """Shapes a fit can use, and how their brightness function is built once per fit.
 
-``SHAPES`` maps a name to a `Shape`: how to build the `raycast.renderer.scene.Scene` (or, for the
-analytic ``box``, a `ConvexFacets`), which articulation parameters it has and their default
-values. `brightness_for` turns a shape and the fit's free parameters into the object the
+``SHAPES`` maps a name to a built-in `Shape`; `mesh_shape` makes a `Shape` of any mesh file
+(OBJ, PLY, glTF) with its materials JSON and articulations, and `resolve_shape` picks one from a
+fit's ``[model]`` section. A `Shape` says how to build the `raycast.renderer.scene.Scene` (or,
+for the analytic bodies, a `ConvexFacets`), which articulation parameters it has and their
+default values. `brightness_for` turns a shape and the fit's free parameters into the object the
 forward model calls at every step, ``intensity(sun_body, obs_body, **parameters)``:
 
 ``renderer="cached"`` (default)
-    `raycast.renderer.cache.SceneCache`, built once. A free articulation parameter (e.g. TOPEX's
-    ``panel_pitch_deg``) gets an articulation grid over its prior's range; a fixed one is
-    baked into the scene.
+    `raycast.renderer.cache.SceneCache`, built once per (scene content, settings) and kept by a
+    `rsodb.fit.shape_store.ShapeStore` (on disk beside the archive for archived passes). A free
+    articulation parameter (e.g. TOPEX's ``panel_pitch_deg``) gets an articulation grid over its
+    prior's range; a fixed one is baked into the scene.
 ``renderer="direct"``
     `raycast.renderer.direct.DirectRenderer`: the slow reference, for checks.
 
@@ -18,16 +21,19 @@ therefore swaps the scene's BRDFs for rescaled copies (``Scene.with_brdfs``) bef
 which changes no precomputed table. The cache's glint sampling (element size along smooth
 normals, solar-disk samples) is chosen from the smoothest roughness the prior allows.
 
-Caches are kept per process (`functools.lru_cache`), so fitting many passes of one object in
-one worker builds the shape's cache once.
+The built-in models built by code approximate real objects (``topex``: TOPEX/Poseidon from its
+published dimensions; ``cosmos2502``: a look-alike of the published workflow's COSMOS 2502 mesh; docs/fitting.md
+says how far each is from its original); to fit the published workflow's own model, give its
+mesh file (``[model] mesh``, see configs/cosmos2502_paper.toml).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 import functools
 import math
+from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
@@ -38,7 +44,9 @@ from raycast.renderer.brdf import GGX, Lambertian, Principled
 from raycast.renderer.cache import SceneCache
 from raycast.renderer.direct import DirectRenderer
 from raycast.renderer.rays import sun_samples_for
+from raycast.renderer.scene import Articulation, Scene
 from rsodb.fit.model import ConvexFacets
+from rsodb.fit.shape_store import ShapeStore
 
 __all__ = [
     "Shape",
@@ -47,6 +55,9 @@ __all__ = [
     "MATERIAL_PARAMETERS",
     "MaterialScalars",
     "brightness_for",
+    "mesh_shape",
+    "resolve_shape",
+    "articulation_from_dict",
     "shape_for_norad",
 ]
 
@@ -57,12 +68,13 @@ _GRID_PER_DEG = 0.5
 
 @dataclass(frozen=True)
 class Shape:
-    """A named model.
+    """A model a fit can use.
 
     Attributes
     ----------
     build : callable
-        ``build() -> Scene`` (or ``ConvexFacets`` when `analytic`).
+        ``build() -> Scene`` (or ``ConvexFacets`` when `analytic`); a module-level function or a
+        ``functools.partial`` of one, so shapes pickle.
     articulations : mapping of str to float
         Articulation parameters and their default (fixed) values.
     analytic : bool
@@ -105,9 +117,18 @@ SHAPES: Mapping[str, Shape] = MappingProxyType(
             _topex,
             {"panel_pitch_deg": 12.0},
             False,
-            "TOPEX/Poseidon: bus, solar array (pitch 12 deg per the published fit), antennas",
+            "TOPEX/Poseidon approximated by code from its published dimensions (raycast.models.topex): bus, "
+            "instrument module, solar array (pitch 12 deg per the published fit), antennas; layout and "
+            "finishes are guesses within the published sizes",
         ),
-        "cosmos2502": Shape(_cosmos2502, {}, False, "COSMOS 2502 (Lotos-S1): the published workflow's model"),
+        "cosmos2502": Shape(
+            _cosmos2502,
+            {},
+            False,
+            "a look-alike of the published workflow's COSMOS 2502 (Lotos-S1) mesh built by code "
+            "(raycast.models.cosmos2502): cylinder, two panels, cross; not that mesh, whose file a fit takes "
+            "with [model] mesh (configs/cosmos2502_paper.toml)",
+        ),
         "box": Shape(_box, {}, True, "a 1 x 1 x 2 m Lambertian box along body z, albedo 0.2 (analytic)"),
         "ellipsoid": Shape(
             _ellipsoid,
@@ -129,6 +150,7 @@ SHAPES: Mapping[str, Shape] = MappingProxyType(
 
 # Objects whose model the project has, by NORAD number.
 AUTO_SHAPES: Mapping[int, str] = MappingProxyType({22076: "topex", 40358: "cosmos2502"})
+ARTICULATION_KEYS = ("parameter", "part", "axis", "point_m", "rest_deg")
 
 
 def shape_for_norad(norad: int, fallback: str | None = "ellipsoid") -> str:
@@ -138,9 +160,94 @@ def shape_for_norad(norad: int, fallback: str | None = "ellipsoid") -> str:
     if fallback is None:
         raise ValueError(
             f"no model of NORAD {norad} is known (known: {', '.join(f'{k} {v}' for k, v in AUTO_SHAPES.items())}); "
-            f"name a shape in the fit configuration ([model] shape = one of {', '.join(SHAPES)})"
+            f"name a shape in the fit configuration ([model] shape = one of {', '.join(SHAPES)}, or mesh = PATH)"
         )
     return fallback
+
+
+def articulation_from_dict(record: Mapping, where: str = "[model] articulations") -> Articulation:
+    """An `Articulation` from its configuration form.
+
+    ``{parameter = "panel_pitch_deg", part = "Sat_sp1", axis = [1, 0, 0], point_m = [0, 0, 5],
+    rest_deg = 0}``: the part (an OBJ object or group name) turns about the axis through the point
+    by the parameter's value minus ``rest_deg``.
+    """
+    unknown = sorted(set(record) - set(ARTICULATION_KEYS))
+    missing = [k for k in ("parameter", "part", "axis") if k not in record]
+    if unknown or missing:
+        raise ValueError(
+            f"{where}: an articulation needs parameter, part and axis (optional point_m, rest_deg); "
+            f"got {sorted(record)}"
+        )
+    name = record["parameter"]
+    if not (isinstance(name, str) and name.endswith("_deg") and name.isidentifier()):
+        raise ValueError(f"{where}: parameter {name!r} must be a name ending in _deg, e.g. 'panel_pitch_deg'")
+    return Articulation(
+        part=str(record["part"]),
+        parameter=name,
+        axis_point_m=tuple(record.get("point_m", (0.0, 0.0, 0.0))),
+        axis=tuple(record["axis"]),
+        rest_deg=float(record.get("rest_deg", 0.0)),
+    )
+
+
+def _mesh_scene(path: str, materials: str | None, articulations: tuple, repair: bool) -> Scene:
+    return Scene.from_file(
+        path,
+        materials=materials,
+        articulations=tuple(articulation_from_dict(a) for a in articulations),
+        repair=repair,
+    )
+
+
+def mesh_shape(path, materials=None, articulations: Sequence[Mapping] = (), repair: bool = False) -> Shape:
+    """A `Shape` read from a mesh file with its materials JSON.
+
+    Parameters
+    ----------
+    path : str or Path
+        OBJ (with ``usemtl`` groups and ``vn`` shading normals), PLY or glTF.
+    materials : str or Path, optional
+        The sidecar materials JSON (BSDF per material); without it an OBJ's ``.mtl`` colours are
+        read as Lambertian.
+    articulations : sequence of mapping
+        Articulated parts in the configuration form (`articulation_from_dict`).
+    repair : bool
+        Keep one face of each set of coincident faces (a zero-thickness plate) instead of refusing.
+    """
+    path = Path(path)
+    for what, file in (("mesh", path), ("materials", materials)):
+        if file is not None and not Path(file).is_file():
+            raise FileNotFoundError(
+                f"[model] {what} = {str(file)!r} does not exist; give the path of the "
+                + ("OBJ, PLY or glTF file" if what == "mesh" else "materials JSON")
+            )
+    records = tuple(dict(a) for a in articulations)
+    parsed = [articulation_from_dict(a) for a in records]
+    build = functools.partial(
+        _mesh_scene, str(path.resolve()), None if materials is None else str(Path(materials).resolve()), records, repair
+    )
+    return Shape(
+        build,
+        {a.parameter: a.rest_deg for a in parsed},
+        False,
+        f"the mesh {path.name}"
+        + (f" with the materials {Path(materials).name}" if materials else "")
+        + (f", articulated by {', '.join(a.parameter for a in parsed)}" if parsed else ""),
+    )
+
+
+def resolve_shape(model, norad: int) -> tuple[str, Shape]:
+    """(name, Shape) of a ``[model]`` section (a `ModelConfig`) for an object.
+
+    A mesh file wins; otherwise the named shape, or for ``auto`` the object's own model
+    (`AUTO_SHAPES`) or the generic ellipsoid.
+    """
+    if model.mesh:
+        shape = mesh_shape(model.mesh, model.materials or None, model.articulations, model.repair_mesh)
+        return f"mesh:{Path(model.mesh).name}", shape
+    name = shape_for_norad(norad) if model.shape == "auto" else model.shape
+    return name, SHAPES[name]
 
 
 def _rescaled_brdf(brdf, albedo_scale: float, roughness: float | None):
@@ -197,13 +304,7 @@ class MaterialScalars:
         return renderer.intensity(sun_body, obs_body, **articulation)
 
 
-@functools.lru_cache(maxsize=4)
-def _cached_scene_cache(
-    shape: str, fixed: tuple, grid: tuple, smoothest_roughness: float | None, accuracy_mag: float, progress: bool
-):
-    scene = SHAPES[shape].build()
-    if fixed:
-        scene = scene.with_parameters(**dict(fixed))
+def _build_cache(scene, grid: tuple, smoothest_roughness: float | None, accuracy_mag: float, progress: bool):
     options = {}
     if smoothest_roughness is not None:
         smooth = scene.with_brdfs(
@@ -225,7 +326,7 @@ def _cached_scene_cache(
 
 
 def brightness_for(
-    shape: str,
+    shape: Shape,
     free_bounds: Mapping[str, tuple[float, float]],
     fixed: Mapping[str, float],
     *,
@@ -233,13 +334,15 @@ def brightness_for(
     accuracy_mag: float = 0.01,
     pixel_size_m: float = 0.05,
     progress: bool = False,
+    store: ShapeStore | None = None,
+    name: str = "shape",
 ):
     """The brightness function of a shape for a fit.
 
     Parameters
     ----------
-    shape : str
-        A key of `SHAPES`.
+    shape : Shape
+        A value of `SHAPES`, or `mesh_shape(...)`.
     free_bounds : mapping of str to (low, high)
         Prior ranges of the free brightness parameters (articulations, material scalars).
     fixed : mapping of str to float
@@ -252,6 +355,10 @@ def brightness_for(
         Ray spacing of the direct renderer.
     progress : bool
         Progress bar while the cache is built.
+    store : ShapeStore, optional
+        Where built caches are kept (default: this process's memory only).
+    name : str
+        The shape's name, for messages.
 
     Returns
     -------
@@ -260,43 +367,43 @@ def brightness_for(
         parameters the forward model must pass to it (every articulation of the shape, free
         or fixed, and the material scalars in use).
     """
-    if shape not in SHAPES:
-        raise ValueError(f"unknown shape {shape!r}; use one of {', '.join(SHAPES)}")
-    spec = SHAPES[shape]
-    allowed = set(spec.articulations) | set(MATERIAL_PARAMETERS)
+    allowed = set(shape.articulations) | set(MATERIAL_PARAMETERS)
     names = set(free_bounds) | set(fixed)
     unknown = sorted(names - allowed)
     if unknown:
-        raise ValueError(f"shape {shape!r} has no parameters {unknown}; it has {', '.join(sorted(allowed))}")
+        raise ValueError(f"shape {name!r} has no parameters {unknown}; it has {', '.join(sorted(allowed))}")
     materials = tuple(n for n in MATERIAL_PARAMETERS if n in names)
-    articulation_free = {n: b for n, b in free_bounds.items() if n in spec.articulations}
+    articulation_free = {n: b for n, b in free_bounds.items() if n in shape.articulations}
     articulation_fixed = {
-        n: float(fixed.get(n, default)) for n, default in spec.articulations.items() if n not in articulation_free
+        n: float(fixed.get(n, default)) for n, default in shape.articulations.items() if n not in articulation_free
     }
-    if spec.analytic:
+    if shape.analytic:
         if materials:
-            raise ValueError(f"shape {shape!r} is analytic and has no material parameters; remove {list(materials)}")
-        return spec.build(), ()
+            raise ValueError(f"shape {name!r} is analytic and has no material parameters; remove {list(materials)}")
+        return shape.build(), ()
+    scene = shape.build()
+    if articulation_fixed:
+        scene = scene.with_parameters(**articulation_fixed)
     if renderer == "cached":
         grid = tuple(
-            (name, tuple(np.linspace(low, high, max(3, int(math.ceil((high - low) * _GRID_PER_DEG)) + 1))))
-            for name, (low, high) in sorted(articulation_free.items())
+            (n, tuple(np.linspace(low, high, max(3, int(math.ceil((high - low) * _GRID_PER_DEG)) + 1))))
+            for n, (low, high) in sorted(articulation_free.items())
         )
         smoothest = None
         if "roughness" in free_bounds:
             smoothest = float(free_bounds["roughness"][0])
         elif "roughness" in fixed:
             smoothest = float(fixed["roughness"])
-        base = _cached_scene_cache(
-            shape, tuple(sorted(articulation_fixed.items())), grid, smoothest, float(accuracy_mag), bool(progress)
+        settings = {"grid": grid, "smoothest_roughness": smoothest, "accuracy_mag": float(accuracy_mag)}
+        base = (store or ShapeStore()).get(
+            scene, settings, functools.partial(_build_cache, scene, grid, smoothest, float(accuracy_mag), progress)
         )
     elif renderer == "direct":
-        scene = spec.build().with_parameters(**articulation_fixed) if articulation_fixed else spec.build()
         base = DirectRenderer(scene, pixel_size_m, 1)
     else:
         raise ValueError(f"renderer={renderer!r} must be 'cached' or 'direct'")
     # Fixed articulations are passed too (the cache checks them against the scene it was built for).
-    parameters = tuple(sorted(spec.articulations)) + materials
+    parameters = tuple(sorted(shape.articulations)) + materials
     if materials:
         return MaterialScalars(base, materials), parameters
     return base, parameters

@@ -1,5 +1,5 @@
 """Spin periods of light curves: detrending, periodograms, harmonic models, dispersion tests,
-the period search with its verdicts, synodic-to-sidereal correction and spin trends.
+the period search with its verdicts, flashes, synodic-to-sidereal correction and spin trends.
 
 >>> from rsodb.periods import LightCurve, find_period                        # doctest: +SKIP
 >>> find_period(LightCurve.from_pass(observed_pass)).best_period_s           # doctest: +SKIP
@@ -20,7 +20,7 @@ from rsodb.periods.search import (
     find_period,
 )
 from rsodb.periods.synodic import SynodicCorrection
-from rsodb.periods.trend import PeriodTrend, fit_period_trend, trend_from_results
+from rsodb.periods.trend import Epoch, PeriodTrend, SpinTrend, fit_period_trend, trend_from_results
 
 __all__ = [
     "analyse_pass",
@@ -37,7 +37,9 @@ __all__ = [
     "PeriodSettings",
     "find_period",
     "SynodicCorrection",
+    "Epoch",
     "PeriodTrend",
+    "SpinTrend",
     "fit_period_trend",
     "trend_from_results",
 ]

@@ -21,16 +21,21 @@ trusted up to a common factor, so ``-2 ln L = n ln(rss / n) + const`` and
 ``BIC = n ln(rss / n) + n_par ln n`` with ``n_par = (d + 1) + 2 K + 1`` (the frequency counts).
 
 Everything works on a `SeriesData`, the light curve prepared once for many trial frequencies.
+Two more things are prepared here, both explained in docs/periods.md: how flexible the trend
+may be for a candidate of a given number of cycles (`trend_degree_limit`), and the light curve
+prewhitened for AR(1) noise (`SeriesData.prewhitened`), on which the same fits are generalised
+least squares.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 import math
 
 import numpy as np
 from numpy.polynomial import legendre
+from scipy.special import spherical_jn
 
 __all__ = [
     "DEFAULT_ERROR_FLOOR_MAG",
@@ -47,6 +52,9 @@ __all__ = [
     "refine_frequency",
     "max_harmonics",
     "powers",
+    "trend_absorption",
+    "trend_degree_limit",
+    "TREND_ABSORPTION",
 ]
 
 
@@ -54,6 +62,10 @@ __all__ = [
 # photon-noise errors the files carry can be 0.003 mag; the floor keeps a few bright frames from
 # dominating the weights.
 DEFAULT_ERROR_FLOOR_MAG = 0.01
+# The most of a candidate sinusoid's variance (worst phase) the trend may be able to absorb.
+TREND_ABSORPTION = 0.2
+# Samples per trend coefficient, at least.
+SAMPLES_PER_TREND_TERM = 10
 
 
 @dataclass(frozen=True)
@@ -154,6 +166,52 @@ class SeriesData:
     @property
     def n_trend(self) -> int:
         return self.trend_degree + 1
+
+    def with_trend_degree(self, degree: int) -> SeriesData:
+        """The same data with a trend of lower `degree` (the Legendre columns are nested: a slice)."""
+        if degree == self.trend_degree:
+            return self
+        if not 0 <= degree <= self.trend_degree:
+            raise ValueError(f"trend degree {degree} is outside 0..{self.trend_degree} of this SeriesData")
+        k = degree + 1
+        return replace(
+            self,
+            trend_degree=int(degree),
+            trend=self.trend[:, :k],
+            rows=self.rows[:, : k + 1],
+            trend_gram=self.trend_gram[:k, :k],
+            trend_rhs=self.trend_rhs[:k],
+        )
+
+    def prewhitened(self, rho: float, cadence_s: float) -> SeriesData:
+        """The data filtered for AR(1) noise of lag-1 correlation `rho`: ``y_i - rho y_(i-1)``.
+
+        For samples at a regular cadence the filter maps the trend and the harmonics of any
+        frequency into their own span (a polynomial stays a polynomial of its degree; a sinusoid
+        keeps its frequency, with a new amplitude and phase), so least squares of the filtered
+        magnitudes on the *unfiltered* basis is generalised least squares under AR(1) noise: the
+        residual sums, and hence the BIC, are those of the correlated-noise likelihood. Samples
+        that do not follow their predecessor at the regular cadence (within half of it: gaps,
+        dropped frames) and the first sample are left out. Weights become
+        ``2 / (1 / w_i + 1 / w_(i-1))``.
+
+        Parameters
+        ----------
+        rho : float
+            In [0, 1).
+        cadence_s : float
+            The regular spacing of the samples.
+
+        Returns
+        -------
+        SeriesData
+            Same trend degree, ``n`` minus the samples left out.
+        """
+        follows = np.abs(np.diff(self.t_s) - cadence_s) <= 0.5 * cadence_s
+        keep = np.flatnonzero(follows) + 1
+        y = self.y[keep] - rho * self.y[keep - 1]
+        weight = 2.0 / (1.0 / self.weight[keep] + 1.0 / self.weight[keep - 1])
+        return SeriesData.from_arrays(self.t_s[keep], y, weight, self.trend_degree)
 
 
 def powers(z: np.ndarray, top: int) -> np.ndarray:
@@ -297,7 +355,7 @@ def normal_equations(data: SeriesData, frequency_hz, n_harmonics: int):
     return gram, rhs
 
 
-def nested_rss(data: SeriesData, frequency_hz, n_harmonics: int) -> np.ndarray:
+def nested_rss(data: SeriesData, frequency_hz, n_harmonics: int, trend_degrees=None) -> np.ndarray:
     """Weighted residual sum of squares of the models with 0..K harmonics.
 
     Parameters
@@ -307,35 +365,64 @@ def nested_rss(data: SeriesData, frequency_hz, n_harmonics: int) -> np.ndarray:
         Trial fundamental frequencies.
     n_harmonics : int
         K, the largest harmonic count.
+    trend_degrees : sequence of int, optional
+        Trend degrees up to the data's own: the normal matrix is built once and its trend
+        block cut down for each (the Legendre columns are nested). Default: the data's degree.
 
     Returns
     -------
-    (K + 1,) or (m, K + 1) float
+    (K + 1,) or (m, K + 1) float, or with `trend_degrees` (len(trend_degrees), K + 1) for one frequency
         Entry ``j`` is the RSS of the trend plus harmonics 1..j. Where the normal matrix is
         singular (a harmonic too close to the trend or above the sampling's reach) the RSS
         stays at the last well-determined value, so that model never wins on fit.
     """
     gram, rhs = normal_equations(data, frequency_hz, n_harmonics)
+    if trend_degrees is None:
+        return _nested_from_normal(gram, rhs, data.n_trend, n_harmonics, data.yy)
+    n_trend = data.n_trend
+    rows = []
+    for degree in trend_degrees:
+        keep = np.r_[0 : degree + 1, n_trend : gram.shape[-1]]
+        sub_gram, sub_rhs = gram[..., keep[:, None], keep], rhs[..., keep]
+        rows.append(_nested_from_normal(sub_gram, sub_rhs, degree + 1, n_harmonics, data.yy))
+    return np.stack(rows)
+
+
+def _nested_from_normal(gram: np.ndarray, rhs: np.ndarray, n_trend: int, n_harmonics: int, yy: float) -> np.ndarray:
+    """Nested RSS (trend plus 0..K harmonics) from a normal matrix with `n_trend` trend columns first."""
     chol, z = _whitened(gram, rhs)
     explained = np.cumsum(z * z, axis=-1)
-    n_trend = data.n_trend
-    rss = data.yy - explained[..., n_trend - 1 + 2 * np.arange(n_harmonics + 1)]
+    rss = yy - explained[..., n_trend - 1 + 2 * np.arange(n_harmonics + 1)]
     # A column nearly dependent on the earlier ones has a tiny pivot; its z is noise amplified.
     pivots = np.diagonal(chol, axis1=-2, axis2=-1)
     bad = pivots[..., n_trend:].reshape(pivots.shape[:-1] + (n_harmonics, 2)).min(axis=-1) < 1e-4
     bad = np.concatenate([np.zeros(bad.shape[:-1] + (1,), bool), np.cumsum(bad, axis=-1) > 0], axis=-1)
     rss = np.where(bad, np.nan, rss)
-    rss = np.maximum(rss, 1e-300 * data.yy)
+    rss = np.maximum(rss, 1e-300 * yy)
     return _forward_fill(rss)
 
 
 def _whitened(gram: np.ndarray, rhs: np.ndarray):
     """Cholesky factor of the Jacobi-scaled normal matrix and ``z = L^-1 rhs`` (scaled alike)."""
-    scale = np.sqrt(np.maximum(np.diagonal(gram, axis1=-2, axis2=-1), 1e-300))
+    diagonal = np.diagonal(gram, axis1=-2, axis2=-1)
+    # A column that vanishes at every sample (a sine at exactly the Nyquist frequency) has only
+    # rounding in its row: scale it as if it were 1e-12 of the largest, not by its own zero.
+    scale = np.sqrt(np.maximum(diagonal, 1e-12 * diagonal.max(axis=-1, keepdims=True) + 1e-300))
     gram = gram / scale[..., :, None] / scale[..., None, :]
-    # A tiny ridge keeps the factorisation defined for nearly collinear columns.
-    gram = gram + 1e-10 * np.eye(gram.shape[-1])
-    chol = np.linalg.cholesky(gram)
+    # Built from trigonometric sums, such a column's diagonal can come out a rounding below zero.
+    scaled = np.einsum("...ii->...i", gram)
+    scaled[...] = np.maximum(scaled, 0.0)
+    # A tiny ridge keeps the factorisation defined for nearly collinear columns; exactly
+    # collinear ones (a harmonic on the sampling's alias of another, or of the trend, in sparse
+    # sampling) need a larger one, which leaves their pivots tiny and their models unchosen.
+    for ridge in (1e-10, 1e-7, 1e-4):
+        try:
+            chol = np.linalg.cholesky(gram + ridge * np.eye(gram.shape[-1]))
+            break
+        except np.linalg.LinAlgError:
+            continue
+    else:
+        raise np.linalg.LinAlgError("the normal matrix of the harmonic fit is singular even with a 1e-4 ridge")
     z = np.linalg.solve(chol, (rhs / scale)[..., None])[..., 0]
     return chol, z
 
@@ -372,6 +459,63 @@ def bic(rss, n_points: int, n_harmonics, trend_degree: int, n_effective: float |
     n_eff = float(n_points if n_effective is None else n_effective)
     n_par = trend_degree + 1 + 2 * np.asarray(n_harmonics) + 1
     return n_eff * np.log(np.asarray(rss) / n_points) + n_par * math.log(n_eff)
+
+
+def trend_absorption(n_cycles, degree: int):
+    """The largest fraction of a sinusoid's variance a polynomial trend can absorb.
+
+    Over a pass of ``n_cycles`` cycles of the sinusoid (evenly sampled), the least-squares
+    Legendre polynomial of `degree` takes up this fraction of the sinusoid's variance, at the
+    worst phase. Exact: ``int P_l(x) exp(i a x) dx = 2 i^l j_l(a)`` over [-1, 1] with
+    ``a = pi n_cycles`` (j_l the spherical Bessel functions), evaluated at 64 phases.
+
+    Parameters
+    ----------
+    n_cycles : float or (m,) float
+    degree : int
+
+    Returns
+    -------
+    float or (m,) float
+
+    Examples
+    --------
+    >>> round(float(trend_absorption(1.0, 3)), 3), round(float(trend_absorption(3.0, 3)), 3)
+    (0.991, 0.176)
+    """
+    a = math.pi * np.asarray(n_cycles, dtype=float)[..., None]  # (..., 1)
+    phase = np.linspace(0.0, math.pi, 64, endpoint=False)
+    order = np.arange(1, int(degree) + 1)
+    power = (2 * order + 1) * spherical_jn(order, a[..., None]) ** 2  # (..., 1, degree)
+    even = power[..., order % 2 == 0].sum(axis=-1)
+    odd = power[..., order % 2 == 1].sum(axis=-1)
+    captured = even * np.cos(phase) ** 2 + odd * np.sin(phase) ** 2
+    total = 0.5 + 0.5 * np.cos(2 * phase) * spherical_jn(0, 2 * a) - (np.cos(phase) * spherical_jn(0, a)) ** 2
+    return np.max(captured / np.maximum(total, 1e-300), axis=-1)
+
+
+@lru_cache(maxsize=16)
+def _cycles_for_degree(degree: int) -> float:
+    """Fewest cycles from which on `degree` never absorbs more than `TREND_ABSORPTION`."""
+    cycles = np.arange(0.25, 40.0, 0.01)
+    bad = np.flatnonzero(trend_absorption(cycles, degree) > TREND_ABSORPTION)
+    return float(cycles[bad[-1] + 1]) if bad.size else float(cycles[0])
+
+
+def trend_degree_limit(n_cycles: float, n_points: int, cap: int) -> int:
+    """Highest trend degree a candidate of `n_cycles` cycles in a pass of `n_points` samples allows.
+
+    The trend is fitted jointly with the harmonics, so it must not be able to imitate the
+    candidate: its degree is the highest whose polynomials absorb at most `TREND_ABSORPTION`
+    of a sinusoid at the candidate's period for that period and every shorter one
+    (`trend_absorption`; degree 1 from 1.21 cycles, 2 from 1.6, 3 from 2.96), with at least
+    `SAMPLES_PER_TREND_TERM` samples per coefficient, and at most `cap`.
+    """
+    by_points = max(0, n_points // SAMPLES_PER_TREND_TERM - 1)
+    degree = 0
+    while degree < min(cap, by_points) and n_cycles >= _cycles_for_degree(degree + 1):
+        degree += 1
+    return degree
 
 
 def max_harmonics(frequency_hz: float, ceiling_hz: float, n_points: int, trend_degree: int, cap: int) -> int:

@@ -15,16 +15,12 @@ The pass trend
 --------------
 ccd_phot magnitudes are already reduced to a range of 1000 km, so what remains slow over a
 pass is the phase-angle dependence of the brightness (and, in files with the extinction sign
-error left uncorrected, airmass). Both are smooth, monotonic or single-humped functions of
-time over a few minutes, so `detrend` fits a low-degree polynomial in time (Legendre basis,
-degree 3 by default) by weighted least squares. A polynomial in time rather than in phase
-angle because it needs no orbit, and because over one pass the phase angle is itself a smooth
-function of time: a cubic in time spans any quadratic in phase angle to well under the
-photometric noise. Degree 3 has at most two turning points, so it cannot follow a periodic
-signal of three or more cycles - the fewest `rsodb.periods` accepts for a confident period;
-slower signals are reported as "too short" anyway. The period search itself refits the trend
-jointly with the harmonics, so detrending first is a convenience for plots and periodograms,
-not a step the period depends on.
+error left uncorrected, airmass): smooth, monotonic or single-humped over a few minutes.
+`detrend` removes a low-degree Legendre polynomial in time (degree 3 by default) by weighted
+least squares, for plots and periodograms. The period search does not depend on it: it fits the
+trend jointly with every Fourier model, with a degree held to the candidate's cycles in the pass
+(`rsodb.periods.harmonic.trend_degree_limit`: a trend may never imitate the candidate), so a
+short pass gets a constant or a line, not a cubic that cancels a one-cycle model.
 """
 
 from __future__ import annotations
@@ -37,7 +33,7 @@ import numpy as np
 from rsodb.periods.harmonic import DEFAULT_ERROR_FLOOR_MAG, TimeAxis
 from rsodb.periods.periodogram import periodogram
 from rsodb.periods.search import find_period
-from rsodb.plotting import axes_or_new
+from rsodb.plotting import axes_or_new, magnitude_label
 
 __all__ = ["LightCurve", "FoldedLightCurve", "DEFAULT_TREND_DEGREE", "DEFAULT_ERROR_FLOOR_MAG"]
 
@@ -74,6 +70,8 @@ class LightCurve:
     band : str
     pass_id : str
         The archive's id when the curve came from a stored pass.
+    mag_convention : str
+        What the magnitudes are (the pass's `mag_convention`, e.g. reduced to 1000 km); labels plots.
     trend_mag : (n,) float, optional
         What `detrend` removed; None while the curve is raw.
     trend_degree : int, optional
@@ -89,6 +87,7 @@ class LightCurve:
     norad: int | None = None
     band: str = ""
     pass_id: str = ""
+    mag_convention: str = ""
     trend_mag: np.ndarray | None = None
     trend_degree: int | None = None
 
@@ -160,6 +159,7 @@ class LightCurve:
             norad=int(pass_.norad),
             band=str(pass_.band),
             pass_id=pass_id,
+            mag_convention=str(getattr(pass_, "mag_convention", "") or ""),
         )
 
     @classmethod
@@ -300,6 +300,7 @@ class LightCurve:
             period_s=period_s,
             epoch_s=float(epoch_s),
             label=self.label,
+            mag_label=magnitude_label(self.band, self.mag_convention, self.trend_mag is not None),
         )
 
     def to_pandas(self):
@@ -323,7 +324,7 @@ class LightCurve:
         if not ax.yaxis_inverted():
             ax.invert_yaxis()
         ax.set_xlabel("time since first sample [s]")
-        ax.set_ylabel("magnitude - trend" if self.trend_mag is not None else "magnitude")
+        ax.set_ylabel(magnitude_label(self.band, self.mag_convention, self.trend_mag is not None))
         if self.label:
             ax.set_title(self.label, fontsize="medium")
         return ax
@@ -346,6 +347,8 @@ class FoldedLightCurve:
         Cycle number of each sample (for colouring by time).
     period_s, epoch_s : float
     label : str
+    mag_label : str
+        The magnitude axis's label (band, range reduction).
     """
 
     phase: np.ndarray
@@ -355,6 +358,7 @@ class FoldedLightCurve:
     period_s: float
     epoch_s: float
     label: str = ""
+    mag_label: str = "magnitude"
 
     def binned(self, n_bins: int = 50) -> tuple[np.ndarray, np.ndarray]:
         """Bin centres (n_bins,) and mean magnitude per bin (NaN where empty)."""
@@ -366,10 +370,13 @@ class FoldedLightCurve:
         return (np.arange(n_bins) + 0.5) / n_bins, mean
 
     def plot(self, ax=None, model=None, **style):
-        """Magnitude against phase, coloured by cycle; `model` is an optional (phase, mag) curve."""
+        """Magnitude against phase, coloured by cycle (with a colour bar); `model` is an optional
+        (phase, mag) curve."""
         ax = axes_or_new(ax)
         options = {"s": 3, "c": self.cycle, "cmap": "viridis", "lw": 0} | style
-        ax.scatter(self.phase, self.mag, **options)
+        points = ax.scatter(self.phase, self.mag, **options)
+        if "c" not in style and self.cycle.size and self.cycle.max() > self.cycle.min():
+            ax.figure.colorbar(points, ax=ax, label="cycle (0: the one starting at the fold's epoch)", pad=0.01)
         if model is not None:
             phase, mag = model
             ax.plot(phase, mag, color="C3", lw=1.2)
@@ -377,7 +384,7 @@ class FoldedLightCurve:
             ax.invert_yaxis()
         ax.set_xlim(0, 1)
         ax.set_xlabel(f"phase (P = {self.period_s:.4f} s)")
-        ax.set_ylabel("magnitude")
+        ax.set_ylabel(self.mag_label)
         if self.label:
             ax.set_title(self.label, fontsize="medium")
         return ax

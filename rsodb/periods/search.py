@@ -5,43 +5,26 @@ four similar faces puts most power at 2, 3 or 4 times the rotation frequency: on
 of 2024-07-30 the one-term Lomb-Scargle peak is 2.37 s while the light curve repeats every
 9.48 s. `find_period` therefore treats the peak only as a starting point:
 
-1. **Trend and weights.** Magnitudes (range-normalised by the reduction) are fitted with the
-   pass trend modelled as a degree-3 Legendre polynomial in time (see `rsodb.periods.lightcurve`),
-   weights ``1 / (err^2 + 0.01^2)``.
-2. **Periodogram.** astropy's one-term Lomb-Scargle of the detrended curve on the grid of
-   `rsodb.periods.periodogram.frequency_grid` (5 points per 1/T, up to the Nyquist frequency of the
-   cadence); its false-alarm probability (Baluev 2008) is astropy's.
-3. **Candidates.** P/2, P, 2P, 3P and 4P of the peak period P, and of the peak of the harmonic
-   sum ``S(f) = sum_{h<=4} power(h f)`` (which lands on the fundamental of a glint curve
-   whose power is spread over many harmonics); then twice and half the leading candidate until
-   both neighbours of the leader have been tried.
-4. **Scores.** Each candidate's frequency is refined by least squares, and it is scored by a
-   Fourier series plus the trend (`rsodb.periods.harmonic`) with the harmonic count chosen by the BIC.
-   The highest harmonic allowed is the same frequency for every candidate (12 times the peak
-   frequency, at most the Nyquist frequency), so the model of 2P contains the model of P and
-   the BIC decides whether the odd harmonics of 2P - the difference between the two halves of
-   its cycle - are real. A phase-dispersion (PDM) step model with bins of fixed width in time
-   is scored the same way as a shape-free second opinion; string length is reported too.
-5. **Uncertainty.** From the covariance of the best model linearised in the frequency, scaled
-   by the residual scatter and inflated for residual correlation (AR(1)); validated by
-   injection (tests/test_periods_injection.py, docs/periods.md).
-6. **Verdict**, in this order:
+1. **Periodogram.** astropy's one-term Lomb-Scargle of the curve with a cubic removed, on the
+   grid of `rsodb.periods.power.frequency_grid`; its false-alarm probability (Baluev 2008).
+2. **Candidates.** P/2 .. 4P of the peak period P, the peak of the harmonic sum
+   ``sum_{h<=4} power(h f)``, then twice and half the leading candidates.
+3. **Scores.** Each candidate is a Fourier series plus a Legendre trend in time, fitted jointly
+   (`rsodb.periods.harmonic`); the trend may be no more flexible than the candidate's cycles in
+   the pass allow (`trend_degree_limit`), and the BIC chooses the harmonic count and the trend's
+   degree together. Residuals correlated from sample to sample are handled by generalised least
+   squares: the magnitudes are prewhitened for AR(1) noise and every candidate scored again.
+4. **The reported period** is the best candidate that repeats at least twice in the pass;
+   slower ones (one cycle spanning most of the pass fits any smooth change) only say whether
+   the pass is too short.
+5. **Verdict** (`rsodb.periods.verdicts`): no signal, single glint, too short, non-periodic,
+   aliased, ambiguous harmonic or confident, with one sentence saying why.
+6. **Synodic and sidereal.** With the pass geometry, the phase-angle-bisector correction of
+   `rsodb.periods.synodic` gives the sidereal period for either sense of rotation.
 
-   * ``"no signal"``: the Lomb-Scargle false-alarm probability exceeds 1e-3, or the strongest
-     harmonic is less than 4 times the mean residual amplitude spectrum around its frequency
-     (the S/N >= 4 criterion of Breger et al. 1993, A&A 271, 482), which rejects slow
-     non-repeating variations that white-noise statistics call significant;
-   * ``"too short"``: the best period fits fewer than 3 times into the pass;
-   * ``"ambiguous harmonic"``: another candidate is within 10 of the best BIC (Kass & Raftery
-     1995 call a difference above 10 very strong evidence), or PDM prefers another candidate;
-   * ``"confident"`` otherwise.
-
-7. **Synodic and sidereal.** The measured period is synodic; with the pass geometry the
-   phase-angle-bisector correction of `rsodb.periods.synodic` gives the sidereal period for either
-   sense of rotation.
-
-Results are `PeriodResult` objects, stored in the archive with `to_hdf5` and read with
-`PeriodResult.from_hdf5`; `result.prior_interval_s()` gives the interval of a fit's spin-period prior.
+The narrative, thresholds and their calibration: docs/periods.md. Results are `PeriodResult`
+objects, stored in the archive with `to_hdf5` and read with `PeriodResult.from_hdf5`;
+`result.prior_interval_s()` gives the interval of a fit's spin-period prior.
 """
 
 from __future__ import annotations
@@ -52,8 +35,10 @@ from typing import TYPE_CHECKING
 
 import astropy.units as u
 import numpy as np
+from scipy.stats import chi2
 
 from rsodb.periods import dispersion
+from rsodb.periods.glints import find_flashes
 from rsodb.periods.harmonic import (
     HarmonicFit,
     SeriesData,
@@ -63,11 +48,17 @@ from rsodb.periods.harmonic import (
     max_harmonics,
     nested_rss,
     polish_frequency,
-    powers,
     scan_frequency,
+    trend_degree_limit,
+)
+from rsodb.periods.noise import (
+    point_to_point_noise_mag,
+    residual_amplitude_mag,
+    white_amplitude_mag,
 )
 from rsodb.periods.power import power_spectrum
 from rsodb.periods.synodic import SynodicCorrection
+from rsodb.periods.verdicts import PERIOD_VERDICTS, VERDICTS, Evidence, judge
 from rsodb.storage import attr_plain, attr_text, finite_or_none
 
 if TYPE_CHECKING:
@@ -84,17 +75,27 @@ __all__ = [
     "DEFAULT_RESULT_NAME",
 ]
 
-VERDICTS = ("confident", "ambiguous harmonic", "too short", "no signal")
-METHOD = "lombscargle+harmonic-bic+pdm"
-SCHEMA = "rsodb.periods/1"
+METHOD = "lombscargle+harmonic-gls-bic+pdm"
+SCHEMA = "rsodb.periods/2"
+# Results stored before the verdicts of issue 18 (no trend degree per candidate) are still read.
+READABLE_SCHEMAS = ("rsodb.periods/1", SCHEMA)
 DEFAULT_RESULT_NAME = "default"
 # Fewer samples than this cannot fit a trend and a few harmonics with any redundancy.
 MIN_POINTS = 20
-# Significance at which phase dispersion must confirm a period over a shorter one dividing it.
-PDM_P_VALUE = 1e-3
 # Shorter candidates spanning more samples than this cannot fake a longer period by aliasing
 # (their harmonics above the Nyquist frequency, k > 12, carry no measurable power).
 ALIAS_MAX_SAMPLES = 25
+# A period is seen to repeat only if the pass holds two of its cycles; slower candidates fit any
+# smooth change and are not reported as the period.
+REPEAT_CYCLES = 2.0
+# AR(1) coefficients: at most this (a random walk has no white part left to fit), and changes
+# smaller than this do not repeat the prewhitening.
+RHO_MAX = 0.98
+RHO_STEP = 0.05
+# Gaps of at least this fraction of the pass are checked for cycle-count aliases.
+GAP_MIN_FRACTION = 0.05
+# A harmonic rival is judged in each half of the pass when it has this many cycles there.
+HALF_CYCLES = 1.5
 
 
 @dataclass(frozen=True)
@@ -239,6 +240,9 @@ class Candidate:
     string_length : float
     n_cycles : float
         Pass duration over the period.
+    trend_degree : int
+        Degree of the trend fitted with it (chosen with the harmonic count, see
+        `rsodb.periods.harmonic.trend_degree_limit`).
     """
 
     period_s: float
@@ -251,6 +255,7 @@ class Candidate:
     pdm_bic: float
     string_length: float
     n_cycles: float
+    trend_degree: int = 3
 
 
 _CANDIDATE_DTYPE = np.dtype(
@@ -265,6 +270,7 @@ _CANDIDATE_DTYPE = np.dtype(
         ("pdm_bic", "f8"),
         ("string_length", "f8"),
         ("n_cycles", "f8"),
+        ("trend_degree", "i4"),
     ]
 )
 
@@ -284,15 +290,17 @@ class PeriodResult:
     reason : str
         One sentence explaining the verdict.
     candidates : tuple of Candidate
-        All candidates tried, best first.
+        All candidates tried, the reported one first (the best that repeats at least twice in
+        the pass), then by BIC.
     false_alarm_probability : float
         Of the one-term Lomb-Scargle peak (astropy, Baluev method).
     peak_period_s : float
         The Lomb-Scargle peak period (before disambiguation).
     signal_to_noise : float
-        Amplitude of the strongest harmonic over the mean residual amplitude around it.
+        Amplitude of the strongest harmonic over the mean residual amplitude around it (never
+        below what white noise of the curve's own errors gives).
     amplitude_mag : float
-        Peak-to-peak range of the periodic model.
+        Peak-to-peak range of the periodic model (never wider than the magnitudes span).
     n_cycles : float
         Pass duration over the best period.
     n_points : int
@@ -309,6 +317,15 @@ class PeriodResult:
         UTC of the curve's ``t_s = 0`` (start of the pass).
     norad : int or None
     band, pass_id, label : str
+    residual_rho : float
+        AR(1) coefficient the magnitudes were prewhitened with (0: white residuals).
+    explained_fraction : float
+        Share of the brightness variation beyond the noise (about the trend) that the model
+        explains.
+    noise_mag : float
+        Point-to-point noise of the magnitudes (`rsodb.periods.noise.point_to_point_noise_mag`).
+    n_flashes : int
+        Flashes found (`rsodb.periods.glints`); -1 when not looked for.
     """
 
     best_period_s: float
@@ -333,6 +350,10 @@ class PeriodResult:
     band: str = ""
     pass_id: str = ""
     label: str = ""
+    residual_rho: float = math.nan
+    explained_fraction: float = math.nan
+    noise_mag: float = math.nan
+    n_flashes: int = -1
 
     # -- views -----------------------------------------------------------------------------
     @property
@@ -343,7 +364,7 @@ class PeriodResult:
     @property
     def has_period(self) -> bool:
         """True when the verdict names a period ("confident" or "ambiguous harmonic")."""
-        return self.verdict in ("confident", "ambiguous harmonic")
+        return self.verdict in PERIOD_VERDICTS
 
     @property
     def sidereal_bounds_s(self) -> tuple[float, float]:
@@ -431,6 +452,10 @@ class PeriodResult:
             "n_cycles": finite_or_none(self.n_cycles),
             "n_points": self.n_points,
             "duration_s": finite_or_none(self.duration_s),
+            "residual_rho": finite_or_none(self.residual_rho),
+            "explained_fraction": finite_or_none(self.explained_fraction),
+            "noise_mag": finite_or_none(self.noise_mag),
+            "n_flashes": self.n_flashes,
             "candidates": [
                 {k: (finite_or_none(v) if isinstance(v, float) else v) for k, v in asdict(c).items()}
                 for c in self.candidates
@@ -457,9 +482,13 @@ class PeriodResult:
             "amplitude_mag",
             "n_cycles",
             "duration_s",
+            "residual_rho",
+            "explained_fraction",
+            "noise_mag",
         ):
             attrs[name] = float(getattr(self, name))
         attrs["n_points"] = int(self.n_points)
+        attrs["n_flashes"] = int(self.n_flashes)
         for name in ("verdict", "reason", "synodic_note", "band", "pass_id", "label"):
             attrs[name] = str(getattr(self, name))
         attrs["norad"] = -1 if self.norad is None else int(self.norad)
@@ -495,16 +524,18 @@ class PeriodResult:
         """Read what `to_hdf5` wrote."""
         attrs = group.attrs
         schema = attr_text(attrs.get("schema", ""))
-        if schema != SCHEMA:
+        if schema not in READABLE_SCHEMAS:
             raise ValueError(f"HDF5 group {group.name!r} holds {schema or 'no schema'!r}, not a {SCHEMA} period result")
+        table = group["candidates"][()]
         candidates = tuple(
             Candidate(
                 **{
                     name: (row[name].decode() if name == "label" else row[name].item())
                     for name in _CANDIDATE_DTYPE.names
+                    if name in table.dtype.names
                 }
             )
-            for row in group["candidates"][()]
+            for row in table
         )
         model = None
         if "model" in group:
@@ -551,6 +582,10 @@ class PeriodResult:
             band=attr_text(attrs["band"]),
             pass_id=attr_text(attrs["pass_id"]),
             label=attr_text(attrs["label"]),
+            residual_rho=float(attrs.get("residual_rho", math.nan)),
+            explained_fraction=float(attrs.get("explained_fraction", math.nan)),
+            noise_mag=float(attrs.get("noise_mag", math.nan)),
+            n_flashes=int(attrs.get("n_flashes", -1)),
         )
 
 
@@ -559,7 +594,7 @@ class PeriodResult:
 class _Problem:
     """Arrays and constants shared by the evaluation of every candidate of one curve."""
 
-    data: SeriesData  # magnitudes as given (the trend is fitted jointly)
+    raw: SeriesData  # magnitudes as given, with a trend of the settings' degree (fitted jointly)
     y_detrended: np.ndarray  # for the dispersion scores
     duration_s: float
     cadence_s: float
@@ -570,14 +605,43 @@ class _Problem:
     pdm_bin_s: float
     scored: list = field(default_factory=list)
     pdm_within: dict = field(default_factory=dict)  # period_s -> (within SS, occupied bins)
-    n_effective: float | None = None  # AR(1) effective sample size, once estimated
+    rho: float = 0.0  # AR(1) coefficient the data are prewhitened with (0: white)
+    data: SeriesData | None = None  # what candidates are scored on: `raw` or raw prewhitened
+    views: dict = field(default_factory=dict)  # trend degree -> `data` with that trend
 
-    def criterion(self, rss, n_harmonics):
-        """BIC of harmonic counts `n_harmonics` with RSS `rss` (effective sample size when known)."""
-        return bic(rss, self.data.n_points, n_harmonics, self.settings.trend_degree, self.n_effective)
+    def __post_init__(self):
+        if self.data is None:
+            self.data = self.raw
 
-    def leader(self) -> _Scored | None:
-        return min(self.scored, key=lambda s: s.bic) if self.scored else None
+    def view(self, degree: int) -> SeriesData:
+        """The scored data with a trend of `degree`."""
+        if degree not in self.views:
+            self.views[degree] = self.data.with_trend_degree(degree)
+        return self.views[degree]
+
+    def trend_cap(self, frequency_hz: float) -> int:
+        """Highest trend degree a candidate at `frequency_hz` allows (`trend_degree_limit`)."""
+        return trend_degree_limit(frequency_hz * self.duration_s, self.raw.n_points, self.settings.trend_degree)
+
+    def prewhiten(self, rho: float) -> None:
+        """Score from now on the data prewhitened for AR(1) noise of coefficient `rho`."""
+        self.rho = rho
+        self.data = self.raw.prewhitened(rho, self.cadence_s) if rho > 0 else self.raw
+        self.views = {}
+
+    def criterion(self, rss, n_harmonics, degree: int):
+        """BIC of harmonic counts `n_harmonics` with RSS `rss` and a trend of `degree`."""
+        return bic(rss, self.data.n_points, n_harmonics, degree)
+
+    def cycles(self, scored: _Scored) -> float:
+        return scored.frequency_hz * self.duration_s
+
+    def leader(self, repeating: bool = True) -> _Scored | None:
+        """Lowest BIC (among candidates repeating at least twice, when any do)."""
+        pool = [s for s in self.scored if not s.degenerate]
+        if repeating:
+            pool = [s for s in pool if self.cycles(s) >= REPEAT_CYCLES] or pool
+        return min(pool, key=lambda s: s.bic) if pool else None
 
     def same(self, f_a: float, f_b: float) -> bool:
         """Two frequencies name the same candidate (closer than a quarter of a resolution element)."""
@@ -591,12 +655,14 @@ class _Problem:
 class _Scored:
     label: str
     start_hz: float
-    fit: HarmonicFit
+    fit: HarmonicFit | None  # on the problem's current data
     k_max: int
-    bic: float  # the criterion used for ranking (effective-sample BIC once known)
-    rss_curve: np.ndarray  # nested RSS for 0..k harmonics near the candidate's frequency
+    trend_degree: int
+    bic: float  # the criterion used for ranking
+    rss_curve: np.ndarray  # nested RSS for 0..k harmonics with `trend_degree`, near the candidate's frequency
     refined: bool = False
     scan_hz: float = math.nan  # where the scan put it
+    degenerate: bool = False  # its trend and harmonics cancel: a periodic part wider than the data
 
     @property
     def frequency_hz(self) -> float:
@@ -606,7 +672,8 @@ class _Scored:
 def _finish(problem: _Problem, scored: _Scored) -> None:
     """Fit a candidate left at its scan (for its period error and the ranking table)."""
     if scored.fit is None:
-        scored.fit = fit_harmonics(problem.data, scored.scan_hz, _choose(problem, scored.rss_curve))
+        k = _choose(problem, scored.rss_curve, scored.trend_degree)
+        scored.fit = fit_harmonics(problem.view(scored.trend_degree), scored.scan_hz, k)
 
 
 def _admissible(problem: _Problem, frequency_hz: float) -> bool:
@@ -618,9 +685,9 @@ def _admissible(problem: _Problem, frequency_hz: float) -> bool:
     )
 
 
-def _choose(problem: _Problem, rss_curve: np.ndarray) -> int:
+def _choose(problem: _Problem, rss_curve: np.ndarray, degree: int) -> int:
     """Harmonic count with the lowest criterion, from nested RSS for 0..k harmonics."""
-    return int(np.argmin(problem.criterion(rss_curve[1:], np.arange(1, len(rss_curve))))) + 1
+    return int(np.argmin(problem.criterion(rss_curve[1:], np.arange(1, len(rss_curve)), degree))) + 1
 
 
 def _scan(problem: _Problem, frequency_hz: float, label: str) -> _Scored | None:
@@ -628,40 +695,56 @@ def _scan(problem: _Problem, frequency_hz: float, label: str) -> _Scored | None:
 
     The scanned model keeps the harmonics up to ~3x the Lomb-Scargle peak frequency - the same
     frequency content for every candidate, so the models of P and 2P stay nested and the
-    scan's BIC already ranks them fairly.
+    scan's BIC already ranks them fairly. The trend is the most flexible the candidate allows.
     """
-    s, data = problem.settings, problem.data
+    s = problem.settings
     if not _admissible(problem, frequency_hz):
         return None
-    k_max = max_harmonics(frequency_hz, problem.ceiling_hz, data.n_points, s.trend_degree, s.max_harmonics)
+    degree = problem.trend_cap(frequency_hz)
+    data = problem.view(degree)
+    k_max = max_harmonics(frequency_hz, problem.ceiling_hz, data.n_points, degree, s.max_harmonics)
     k_scan = min(int(math.ceil(3 * problem.peak_hz / frequency_hz)), k_max)
     # The start inherits the error of the Lomb-Scargle peak (up to ~0.15 / T), divided by the
     # multiple: a candidate at f_peak / 4 is known four times better in frequency.
     half_width = 0.3 / problem.duration_s * min(1.0, frequency_hz / problem.peak_hz)
     f, curve = scan_frequency(data, frequency_hz, k_scan, half_width)
-    k = _choose(problem, curve)
+    k = _choose(problem, curve, degree)
     # The fit itself waits until it is needed (`_finish`): most scanned candidates get refined.
-    return _Scored(label, frequency_hz, None, k_max, float(problem.criterion(curve[k], k)), curve, scan_hz=f)
+    return _Scored(
+        label, frequency_hz, None, k_max, degree, float(problem.criterion(curve[k], k, degree)), curve, scan_hz=f
+    )
 
 
 def _refine(problem: _Problem, scored: _Scored) -> None:
-    """Polish a scanned candidate with all its harmonics; the BIC picks their number."""
-    data = problem.data
+    """Polish a candidate with all its harmonics; the BIC picks their number and the trend's degree."""
+    cap = problem.trend_cap(scored.frequency_hz)
+    data = problem.view(cap)
     # Harmonics above the scanned ones are worth trying only if the scan's BIC wanted (nearly)
     # all of the scanned ones: a smooth curve whose BIC stopped early will not want more.
     k_scan = len(scored.rss_curve) - 1
-    k_cap = scored.k_max if _choose(problem, scored.rss_curve) >= 0.75 * k_scan else k_scan
+    wanted = _choose(problem, scored.rss_curve, scored.trend_degree)
+    k_cap = scored.k_max if wanted >= 0.75 * k_scan else k_scan
     curve = nested_rss(data, scored.frequency_hz, k_cap)
-    k = _choose(problem, curve)
+    k = _choose(problem, curve, cap)
     f = polish_frequency(data, scored.frequency_hz, k)
     curve = nested_rss(data, f, k_cap)
-    k_new = _choose(problem, curve)
+    k_new = _choose(problem, curve, cap)
     if k_new != k:
         # A refined frequency keeps high harmonics coherent, so the BIC may then want more of them.
         k = k_new
         f = polish_frequency(data, f, k)
-    scored.fit = fit_harmonics(data, f, k)
-    scored.bic = float(problem.criterion(scored.fit.rss, k))
+    # The trend's degree is chosen with the harmonic count: every degree up to the cap.
+    curves = nested_rss(data, f, k_cap, trend_degrees=range(cap + 1))
+    best = None
+    for degree, curve in enumerate(curves):
+        criterion = problem.criterion(curve[1:], np.arange(1, k_cap + 1), degree)
+        k_d = int(np.argmin(criterion)) + 1
+        if best is None or criterion[k_d - 1] < best[0]:
+            best = (float(criterion[k_d - 1]), degree, k_d, curve)
+    _, degree, k, curve = best
+    scored.fit = fit_harmonics(problem.view(degree), f, k)
+    scored.trend_degree = degree
+    scored.bic = float(problem.criterion(scored.fit.rss, k, degree))
     scored.rss_curve = curve
     scored.refined = True
 
@@ -675,32 +758,78 @@ def _score(problem: _Problem, frequency_hz: float, label: str) -> _Scored | None
 
 
 def _rescore(problem: _Problem, scored: _Scored) -> None:
-    """Choose the harmonic count again and recompute the criterion (after `n_effective` changed)."""
-    k = _choose(problem, scored.rss_curve)
-    if scored.fit is None:
-        scored.bic = float(problem.criterion(scored.rss_curve[k], k))
-        return
-    if k != scored.fit.n_harmonics:
-        scored.fit = fit_harmonics(problem.data, scored.fit.frequency_hz, k)
-    scored.bic = float(problem.criterion(scored.fit.rss, k))
+    """Score a candidate again on the problem's (newly prewhitened) data where it stands.
+
+    Only its criterion is recomputed (its frequency barely moves with the weighting); the
+    candidates that can still lead are polished again by `_refine_near_leader`.
+    """
+    scored.scan_hz = scored.frequency_hz
+    scored.rss_curve = nested_rss(problem.view(scored.trend_degree), scored.scan_hz, len(scored.rss_curve) - 1)
+    k = _choose(problem, scored.rss_curve, scored.trend_degree)
+    scored.fit = None
+    scored.refined = False
+    scored.bic = float(problem.criterion(scored.rss_curve[k], k, scored.trend_degree))
 
 
 def _meet_neighbours(problem: _Problem) -> None:
-    """Score twice and half the leading candidate until both have been tried."""
+    """Score twice and half the leading candidates until both have been tried."""
     for _ in range(6):
-        leader = problem.leader()
-        if leader is None:
-            return
+        leaders = {id(s): s for s in (problem.leader(), problem.leader(repeating=False)) if s is not None}
         added = False
-        for factor, tag in ((0.5, "x2"), (2.0, "x0.5")):
-            f = leader.frequency_hz * factor
-            if not problem.known(f):
-                scored = _score(problem, f, f"{leader.label}{tag}")
-                if scored is not None:
-                    problem.scored.append(scored)
-                    added = True
+        for leader in leaders.values():
+            for factor, tag in ((0.5, "x2"), (2.0, "x0.5")):
+                f = leader.frequency_hz * factor
+                if not problem.known(f):
+                    scored = _score(problem, f, f"{leader.label}{tag}")
+                    if scored is not None:
+                        problem.scored.append(scored)
+                        added = True
         if not added:
             return
+
+
+def _refine_near_leader(problem: _Problem) -> None:
+    """Polish the candidates near the leader (only they can win once refined)."""
+    leader = problem.leader(repeating=False)
+    for scored in problem.scored:
+        if not scored.refined and leader is not None and scored.bic - leader.bic < problem.settings.refine_margin:
+            _refine(problem, scored)
+
+
+def _raw_fit(problem: _Problem, scored: _Scored) -> HarmonicFit:
+    """The candidate's model of the magnitudes as given (for amplitudes, residuals and plots).
+
+    Its frequency and frequency error are those of the candidate's fit on the scored data
+    (generalised least squares when prewhitened); the coefficients are ordinary least squares
+    on the raw magnitudes at that frequency, with the candidate's harmonics and trend.
+    """
+    _finish(problem, scored)
+    fit = scored.fit
+    raw = fit_harmonics(problem.raw.with_trend_degree(scored.trend_degree), fit.frequency_hz, fit.n_harmonics)
+    return replace(raw, frequency_err_hz=fit.frequency_err_hz, inflation=fit.inflation)
+
+
+def _whiten(problem: _Problem) -> None:
+    """Generalised least squares for AR(1) residuals: prewhiten, score again, twice at most.
+
+    Correlated residuals (red noise, or a light-curve shape that drifts during the pass) make
+    every extra harmonic look significant to a white-noise criterion, and multiples of the period
+    - or one slow cycle spanning the pass - fit them best. The lag-1 correlation of the leading
+    candidate's raw residuals sets the AR(1) filter; every candidate is then scored on
+    the filtered magnitudes (`SeriesData.prewhitened`).
+    """
+    for _ in range(2):
+        leader = problem.leader(repeating=False)
+        if leader is None:
+            return
+        rho = min(max(_raw_fit(problem, leader).residual_lag1, 0.0), RHO_MAX)
+        if abs(rho - problem.rho) < RHO_STEP:
+            return
+        problem.prewhiten(rho)
+        for scored in problem.scored:
+            _rescore(problem, scored)
+        _refine_near_leader(problem)
+        _meet_neighbours(problem)
 
 
 def _harmonic_sum_peak(frequency_hz: np.ndarray, power: np.ndarray, terms: int) -> float | None:
@@ -714,33 +843,26 @@ def _harmonic_sum_peak(frequency_hz: np.ndarray, power: np.ndarray, terms: int) 
     return float(f[int(np.argmax(total))])
 
 
-def _signal_to_noise(problem: _Problem, fit: HarmonicFit) -> float:
+def _signal_to_noise(problem: _Problem, fit: HarmonicFit, residual: np.ndarray, error_mag: float) -> float:
     """Strongest harmonic's amplitude over the mean residual amplitude spectrum around it.
 
     The noise is the mean of ``(2 / n) |sum r exp(-2 pi i f t)|`` over 64 frequencies within
     ``max(f_k / 2, 25 / T)`` of the strongest harmonic ``f_k`` (clipped to [1/T, Nyquist]), on
     the residuals of the full model: a slow, non-repeating variation leaves a high residual
-    spectrum there, a clean periodic signal a low one.
+    spectrum there, a clean periodic signal a low one. It is never taken below what white noise
+    of the light curve's own errors (`error_mag`) would give, so a noiseless curve does not get
+    an unbounded S/N.
     """
-    data = problem.data
-    residual = data.y - fit.model_mag(data.t_s)
     amplitudes = fit.harmonic_amplitudes_mag
     k = int(np.argmax(amplitudes)) + 1
     f_k = k * fit.frequency_hz
     half = max(0.5 * f_k, 25.0 / problem.duration_s)
     lo, hi = max(f_k - half, 1.0 / problem.duration_s), min(f_k + half, problem.nyquist_hz)
-    n_trial = 64
-    # exp(-2 pi i (lo + j df) t) = exp(-2 pi i lo t) * exp(-2 pi i df t)^j: one exp per sample.
-    df = (hi - lo) / (n_trial - 1)
-    start = np.exp(-2j * np.pi * lo * data.tc) * (residual - residual.mean())
-    spectrum = np.abs(_spectrum(data.tc, start, df, n_trial))
-    noise = float(np.mean(spectrum) * 2.0 / data.n_points)
+    noise = max(
+        residual_amplitude_mag(problem.raw.t_s, residual, lo, hi),
+        white_amplitude_mag(error_mag, problem.raw.n_points),
+    )
     return float(amplitudes[k - 1] / noise) if noise > 0 else math.inf
-
-
-def _spectrum(tc: np.ndarray, start: np.ndarray, df: float, n_trial: int) -> np.ndarray:
-    """(n_trial,) ``sum start * exp(-2 pi i j df t)`` for j = 0..n_trial-1."""
-    return powers(np.exp(-2j * np.pi * df * tc)[None, :], n_trial - 1)[0] @ start
 
 
 def _no_result(lc: LightCurve, settings: PeriodSettings, verdict: str, reason: str, **values) -> PeriodResult:
@@ -810,10 +932,11 @@ def find_period(
     lc = lightcurve
     if len(lc) < MIN_POINTS:
         return _no_result(lc, settings, "too short", f"only {len(lc)} usable samples (at least {MIN_POINTS} needed)")
+    if np.ptp(lc.mag) == 0:
+        return _no_result(lc, settings, "no signal", f"all {len(lc)} magnitudes are equal: the brightness is constant")
+    degree = min(settings.trend_degree, trend_degree_limit(math.inf, len(lc), settings.trend_degree))
     detrended = (
-        lc
-        if lc.trend_mag is not None and lc.trend_degree == settings.trend_degree
-        else lc.detrend(settings.trend_degree, settings.error_floor_mag)
+        lc if lc.trend_mag is not None and lc.trend_degree == degree else lc.detrend(degree, settings.error_floor_mag)
     )
     if periodogram_ is None or periodogram_.method != "lombscargle" or periodogram_.nterms != 1:
         periodogram_ = power_spectrum(
@@ -827,8 +950,9 @@ def find_period(
     fap = periodogram_.false_alarm_probability()
     duration = lc.duration_s
     nyquist = 0.5 / lc.cadence_s
+    weight = lc.weights(settings.error_floor_mag)
     problem = _Problem(
-        data=SeriesData.from_arrays(lc.t_s, lc.mag, lc.weights(settings.error_floor_mag), settings.trend_degree),
+        raw=SeriesData.from_arrays(lc.t_s, lc.mag, weight, degree),
         y_detrended=detrended.mag,
         duration_s=duration,
         cadence_s=lc.cadence_s,
@@ -852,24 +976,9 @@ def find_period(
                 scored = _scan(problem, f, _multiple_label(multiple, symbol))
                 if scored is not None:
                     problem.scored.append(scored)
-    # Only candidates near the scan's leader can win once refined: polish those.
-    leader = problem.leader()
-    for scored in problem.scored:
-        if leader is not None and scored.bic - leader.bic < settings.refine_margin:
-            _refine(problem, scored)
+    _refine_near_leader(problem)
     _meet_neighbours(problem)
-    # Correlated residuals (red noise, or a shape that drifts during the pass) make every extra
-    # harmonic look significant, and multiples of the period fit them best. Re-rank with the
-    # AR(1) effective sample size of the leader's residuals (Bayley & Hammersley 1946).
-    leader = problem.leader()
-    if leader is not None:
-        _finish(problem, leader)
-    rho = 0.0 if leader is None else min(max(leader.fit.residual_lag1, 0.0), 0.98)
-    if rho > 0.05:
-        problem.n_effective = problem.data.n_points * (1 - rho) / (1 + rho)
-        for scored in problem.scored:
-            _rescore(problem, scored)
-        _meet_neighbours(problem)
+    _whiten(problem)
     if not problem.scored:
         return _no_result(
             lc,
@@ -882,29 +991,32 @@ def find_period(
 
     for scored in problem.scored:
         _finish(problem, scored)
-    candidates = _rank(problem)
-    fit = problem.leader().fit
-    best = candidates[0]
-    snr = _signal_to_noise(problem, fit)
-    verdict, reason = _verdict(problem, candidates, fap, snr, 1.0 / f_peak)
+    noise_mag = point_to_point_noise_mag(lc.t_s, lc.mag, lc.cadence_s)
+    error_mag = float(np.sqrt(np.median(1.0 / weight)))
+    best, model = _best_model(problem, noise_mag)
+    candidates = _rank(problem, best)
+    residual = lc.mag - model.model_mag(lc.t_s)
+    snr = _signal_to_noise(problem, model, residual, error_mag)
+    evidence, explained = _evidence(problem, lc, best, model, candidates, fap, snr, residual, noise_mag, weight)
+    verdict, reason = judge(evidence, settings)
 
     synodic, note = None, "no pass geometry given"
     if geometry is not None:
-        synodic, note = SynodicCorrection.from_geometry(fit.period_s, geometry), ""
+        synodic, note = SynodicCorrection.from_geometry(model.period_s, geometry), ""
     return PeriodResult(
-        best_period_s=fit.period_s,
-        uncertainty_s=fit.period_err_s,
+        best_period_s=model.period_s,
+        uncertainty_s=model.period_err_s,
         verdict=verdict,
         reason=reason,
         candidates=candidates,
         false_alarm_probability=fap,
         peak_period_s=1.0 / f_peak,
         signal_to_noise=snr,
-        amplitude_mag=fit.peak_to_peak_mag,
-        n_cycles=best.n_cycles,
+        amplitude_mag=model.peak_to_peak_mag,
+        n_cycles=candidates[0].n_cycles,
         n_points=len(lc),
         duration_s=duration,
-        model=fit,
+        model=model,
         synodic=synodic,
         synodic_note=note,
         settings=settings,
@@ -913,7 +1025,104 @@ def find_period(
         band=lc.band,
         pass_id=lc.pass_id,
         label=lc.label,
+        residual_rho=problem.rho,
+        explained_fraction=explained,
+        noise_mag=noise_mag,
+        n_flashes=evidence.flashes.count,
     )
+
+
+def _best_model(problem: _Problem, noise_mag: float) -> tuple[_Scored, HarmonicFit]:
+    """The reported candidate and its raw model.
+
+    The best candidate that repeats at least twice in the pass, unless a slower one beats it by
+    the BIC margin (then the pass is too short for any period, and the slow one is the best
+    description). A candidate whose trend and harmonics cancel each other (possible only when
+    they nearly share a span) gets a periodic part swinging far beyond the magnitudes; it is
+    marked degenerate and the next one leads.
+    """
+    span = float(np.ptp(problem.raw.y)) + 4.0 * (noise_mag if math.isfinite(noise_mag) else 0.0)
+    while True:
+        best, overall = problem.leader(), problem.leader(repeating=False)
+        if overall.bic < best.bic - problem.settings.bic_margin:
+            best = overall
+        model = _raw_fit(problem, best)
+        if model.peak_to_peak_mag <= span or all(s.degenerate or s is best for s in problem.scored):
+            return best, model
+        best.degenerate = True
+
+
+def _evidence(problem, lc, best, model, candidates, fap, snr, residual, noise_mag, weight):
+    """The `Evidence` of the verdict, and the fraction of the variation the best model explains."""
+    s = problem.settings
+    raw = problem.raw.with_trend_degree(best.trend_degree)
+    sw = np.sqrt(weight)
+    coefficients, *_ = np.linalg.lstsq(raw.trend * sw[:, None], lc.mag * sw, rcond=None)
+    about_trend = lc.mag - raw.trend @ coefficients
+    gain = float(np.sum(weight * about_trend**2) - np.sum(weight * residual**2))
+    limit = float(chi2.isf(s.fap_threshold, 2 * model.n_harmonics + 1))
+    explained, structured = _explained(problem, best)
+    flashes = find_flashes(lc.t_s, lc.mag, noise_mag, problem.cadence_s)
+    # Scored candidates in the order of `candidates` (the reported one first).
+    by_scored = {candidates[i]: scored for i, scored in enumerate(_ranked(problem, best))}
+    evidence = Evidence(
+        duration_s=problem.duration_s,
+        cadence_s=problem.cadence_s,
+        false_alarm_probability=fap,
+        peak_period_s=1.0 / problem.peak_hz,
+        flat=(gain, limit) if gain < limit else None,
+        signal_to_noise=snr,
+        structured=structured,
+        explained_fraction=explained,
+        best=candidates[0],
+        candidates=candidates,
+        flashes=flashes,
+        flashes_alone=_flashes_alone(lc, flashes, problem.settings),
+        cadence_alias=_cadence_alias(problem, candidates[0], candidates),
+        gap_alias=_gap_alias(problem, best),
+        covered_s=_covered_s(problem),
+        pdm_weakest=_pdm_weakest(problem, candidates),
+        halves=_halves(problem, best, by_scored),
+        conservative=_conservative_rival(problem, best, model, by_scored),
+    )
+    return evidence, explained
+
+
+def _flashes_alone(lc: LightCurve, flashes, settings: PeriodSettings) -> bool:
+    """True unless one or two dominant flashes leave a significant periodic signal behind them.
+
+    Weak flashes repeating through the pass can show one of them above the noise; the rest of
+    the curve then still has a Lomb-Scargle peak below the false-alarm threshold.
+    """
+    if not (flashes.dominant and flashes.count <= 2):
+        return True
+    rest = lc.select(flashes.outside(lc.t_s))
+    if len(rest) < MIN_POINTS:
+        return True
+    spectrum = power_spectrum(rest.detrend(min(settings.trend_degree, 3)), error_floor_mag=settings.error_floor_mag)
+    return not spectrum.false_alarm_probability() <= settings.fap_threshold
+
+
+def _explained(problem: _Problem, best: _Scored) -> tuple[float, bool]:
+    """Share of the variation beyond the noise that the best model explains, and whether the rest is noise.
+
+    Judged on the scored magnitudes (prewhitened when the residuals were correlated), where
+    red noise and slow drifts are whitened away: what remains unexplained there is structure at
+    the time scales of the period that does not repeat. The noise is the point-to-point scatter
+    of those magnitudes; the residual is structured when its variance exceeds the noise's by
+    more than `max(25%, 8 / sqrt(n))` (the scatter of that estimate is ~2.5 / sqrt(n)).
+    """
+    data = problem.view(best.trend_degree)
+    coefficients, *_ = np.linalg.lstsq(
+        data.trend * np.sqrt(data.weight)[:, None], data.y * np.sqrt(data.weight), rcond=None
+    )
+    signal_var = float(np.var(data.y - data.trend @ coefficients))
+    residual_var = float(np.var(data.y - best.fit.model_mag(data.t_s)))
+    noise = point_to_point_noise_mag(data.t_s, data.y, problem.cadence_s)
+    noise_var = noise**2 if math.isfinite(noise) else 0.0
+    structured = residual_var > noise_var * (1.0 + max(0.25, 8.0 / math.sqrt(data.n_points)))
+    excess = signal_var - noise_var
+    return ((signal_var - residual_var) / excess if excess > 0 else math.nan), structured
 
 
 def _multiple_label(multiple: float, symbol: str) -> str:
@@ -927,19 +1136,26 @@ def _multiple_label(multiple: float, symbol: str) -> str:
     return f"{multiple:g}{symbol}"
 
 
-def _rank(problem: _Problem) -> tuple[Candidate, ...]:
-    scored = sorted(problem.scored, key=lambda s: s.bic)
+def _ranked(problem: _Problem, best: _Scored) -> list[_Scored]:
+    """The scored candidates, the reported one first and the others by BIC."""
+    return [best] + sorted((s for s in problem.scored if s is not best), key=lambda s: s.bic)
+
+
+def _rank(problem: _Problem, best: _Scored) -> tuple[Candidate, ...]:
+    """Every candidate, the reported one first and the others by BIC."""
+    scored = _ranked(problem, best)
     periods = np.array([s.fit.period_s for s in scored])
     bins = np.maximum(2, np.round(periods / problem.pdm_bin_s)).astype(int)
-    n = problem.data.n_points
-    within, occupied = dispersion.pdm_within(problem.data.t_s, problem.y_detrended, periods, bins)
-    total = float(np.sum((problem.y_detrended - problem.y_detrended.mean()) ** 2))
+    y = problem.y_detrended
+    n = y.shape[0]
+    within, occupied = dispersion.pdm_within(problem.raw.t_s, y, periods, bins)
+    total = float(np.sum((y - y.mean()) ** 2))
     # Stellingwerf's theta and the binned model's BIC, as in rsodb.periods.dispersion.pdm / pdm_bic.
-    theta = (within / np.maximum(n - occupied, 1)) / (total / (n - 1))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        theta = (within / np.maximum(n - occupied, 1)) / (total / (n - 1))
     binned_bic = n * np.log(np.maximum(within, 1e-300) / n) + occupied * math.log(n)
     problem.pdm_within.update({float(p): (float(w), float(m)) for p, w, m in zip(periods, within, occupied)})
-    strings = dispersion.string_length(problem.data.t_s, problem.y_detrended, periods)
-    best_bic = scored[0].bic
+    strings = dispersion.string_length(problem.raw.t_s, y, periods)
     return tuple(
         Candidate(
             period_s=s.fit.period_s,
@@ -947,53 +1163,26 @@ def _rank(problem: _Problem) -> tuple[Candidate, ...]:
             label=s.label,
             n_harmonics=s.fit.n_harmonics,
             bic=s.bic,
-            delta_bic=s.bic - best_bic,
+            delta_bic=s.bic - best.bic,
             pdm_theta=float(theta[i]),
             pdm_bic=float(binned_bic[i]),
             string_length=float(strings[i]),
             n_cycles=problem.duration_s / s.fit.period_s,
+            trend_degree=s.trend_degree,
         )
         for i, s in enumerate(scored)
     )
 
 
-def _verdict(
-    problem: _Problem, candidates: tuple[Candidate, ...], fap: float, snr: float, peak_period_s: float
-) -> tuple[str, str]:
-    s = problem.settings
+def _pdm_weakest(problem: _Problem, candidates) -> tuple[Candidate, float] | None:
+    """The shorter candidate dividing the best with the largest PDM F-test p-value.
+
+    Phase dispersion, free of any shape assumption, must confirm that the best cycle is not a
+    repeat of a shorter candidate that divides it (PDM cannot judge longer multiples: finer
+    folds always disperse a little less).
+    """
     best = candidates[0]
-    if not fap <= s.fap_threshold:
-        return "no signal", (
-            f"the highest Lomb-Scargle peak ({peak_period_s:.4g} s) has false-alarm probability "
-            f"{fap:.2g}, above {s.fap_threshold:g}"
-        )
-    if best.n_cycles < s.min_cycles:
-        return "too short", (
-            f"the best period {best.period_s:.4g} s fits only {best.n_cycles:.1f} times in the "
-            f"{problem.duration_s:.0f} s pass (fewer than {s.min_cycles:g})"
-        )
-    if not snr >= s.snr_threshold:
-        return "no signal", (
-            f"the strongest harmonic of {best.period_s:.4g} s is only {snr:.1f} times the residual "
-            f"noise around it (below {s.snr_threshold:g}): the variation does not repeat"
-        )
-    aliased = _cadence_alias(problem, best, candidates)
-    if aliased is not None:
-        return "ambiguous harmonic", (
-            f"{best.period_s:.4g} s may be an artefact of the sampling: {aliased.period_s:.4g} s "
-            f"spans {aliased.period_s / problem.cadence_s:.2f} samples, so its harmonics above "
-            f"the Nyquist frequency alias onto those of {best.period_s:.4g} s"
-        )
-    rivals = [c for c in candidates[1:] if c.delta_bic < s.bic_margin]
-    if rivals:
-        return "ambiguous harmonic", (
-            f"{rivals[0].period_s:.4g} s fits nearly as well as {best.period_s:.4g} s "
-            f"(BIC difference {rivals[0].delta_bic:.1f} < {s.bic_margin:g})"
-        )
-    # Phase dispersion, free of any shape assumption, must confirm that the best cycle is not a
-    # repeat of a shorter candidate that divides it (PDM cannot judge longer multiples: finer
-    # folds always disperse a little less).
-    n = problem.data.n_points
+    n = problem.raw.n_points
     w_best, m_best = problem.pdm_within[best.period_s]
     weakest = None
     for c in candidates[1:]:
@@ -1004,21 +1193,7 @@ def _verdict(
         p_value = dispersion.pdm_f_test(n, w_short, m_short, w_best, m_best)
         if weakest is None or not p_value <= weakest[1]:
             weakest = (c, p_value)
-    if weakest is not None and not weakest[1] < PDM_P_VALUE:
-        return "ambiguous harmonic", (
-            f"the Fourier fits prefer {best.period_s:.4g} s but phase dispersion does not "
-            f"confirm it over {weakest[0].period_s:.4g} s (F-test p = {weakest[1]:.2g})"
-        )
-    runner = candidates[1] if len(candidates) > 1 else None
-    beaten = (
-        f"beats {runner.period_s:.4g} s by a BIC difference of {runner.delta_bic:.0f}" if runner else "only candidate"
-    )
-    confirmed = (
-        f", phase dispersion confirms it over {weakest[0].period_s:.4g} s (p = {weakest[1]:.1g})"
-        if weakest is not None
-        else ""
-    )
-    return "confident", f"{best.period_s:.4g} s {beaten}{confirmed}, S/N {snr:.0f}"
+    return weakest
 
 
 def _cadence_alias(problem: _Problem, best: Candidate, candidates) -> Candidate | None:
@@ -1028,16 +1203,163 @@ def _cadence_alias(problem: _Problem, best: Candidate, candidates) -> Candidate 
     appears at ``|1 / dt - k / P|``. When ``P / dt`` is within ``P / T`` (one resolution
     element) of ``m + j / r`` with ``j`` not a multiple of r, those aliases fall on harmonics of
     ``1 / (r P)`` that P itself lacks, and the sampled curve really repeats only every r P.
-    Only periods spanning fewer than `ALIAS_MAX_SAMPLES` samples are considered: otherwise the
-    harmonics that would alias (above ``P / (2 dt)``) carry no measurable power.
+    Only periods spanning fewer than `ALIAS_MAX_SAMPLES` samples are considered, and only
+    when the shorter candidate's own model needs harmonics up to half the Nyquist frequency:
+    otherwise the harmonics that would alias (above the Nyquist frequency) carry no measurable
+    power.
     """
     for c in candidates[1:]:
         ratio = best.period_s / c.period_s
         r = int(round(ratio))
         if not 2 <= r <= 4 or abs(ratio - r) > 0.02 * ratio or c.period_s / problem.cadence_s > ALIAS_MAX_SAMPLES:
             continue
+        if c.n_harmonics / c.period_s < 0.5 * problem.nyquist_hz:
+            continue
         samples = r * c.period_s / problem.cadence_s
         k = int(round(samples))
         if k % r and abs(samples - k) < r * c.period_s / problem.duration_s:
             return c
     return None
+
+
+def _gap_alias(problem: _Problem, best: _Scored) -> tuple[float, float, float] | None:
+    """A period with one cycle more or less across a gap that fits nearly as well as the best.
+
+    Across a gap the count of cycles is known only as well as the period from the data on
+    either side: ``f +- 1 / D`` (D between the centres of the data before and after the gap)
+    fit the two sides alike when their own periods are not precise to a fraction of a
+    cycle over D. The largest gap is checked when it lasts at least `GAP_MIN_FRACTION` of the
+    pass and 10 cadences; each alias is polished with the best candidate's harmonics and trend.
+
+    Returns
+    -------
+    (period_s, bic_difference, gap_s) of the closest alias within the BIC margin, or None.
+    """
+    t = problem.raw.t_s
+    step = np.diff(t)
+    large = np.flatnonzero(step >= max(GAP_MIN_FRACTION * problem.duration_s, 10 * problem.cadence_s))
+    if not large.size:
+        return None
+    fit = best.fit
+    data = problem.view(best.trend_degree)
+    closest = None
+    for i in large[np.argsort(step[large])[-1:]]:
+        separation = float(np.mean(t[i + 1 :]) - np.mean(t[: i + 1]))
+        for k in (-1, 1):
+            f = fit.frequency_hz + k / separation
+            if f * problem.duration_s < REPEAT_CYCLES or f > problem.ceiling_hz:
+                continue
+            f = polish_frequency(data, f, fit.n_harmonics)
+            if problem.same(f, fit.frequency_hz):
+                continue
+            rss = nested_rss(data, f, fit.n_harmonics)[-1]
+            delta = float(problem.criterion(rss, fit.n_harmonics, best.trend_degree)) - best.bic
+            if delta < problem.settings.bic_margin and (closest is None or delta < closest[1]):
+                closest = (1.0 / f, delta, float(step[i]))
+    return closest
+
+
+def _covered_s(problem: _Problem) -> float:
+    """Time the samples cover: the pass without its gaps (steps as long as `_gap_alias` checks)."""
+    step = np.diff(problem.raw.t_s)
+    gap = step >= max(GAP_MIN_FRACTION * problem.duration_s, 10 * problem.cadence_s)
+    return float(np.sum(step[~gap]) + (np.count_nonzero(gap) + 1) * problem.cadence_s)
+
+
+def _harmonic_ratio(period_a: float, period_b: float) -> int:
+    """r when the longer period is r = 2..4 times the shorter within 2%, else 0."""
+    ratio = max(period_a, period_b) / min(period_a, period_b)
+    r = int(round(ratio))
+    return r if 2 <= r <= 4 and abs(ratio - r) <= 0.02 * ratio else 0
+
+
+def _halves(problem: _Problem, best: _Scored, by_candidate: dict) -> tuple[Candidate, float, float] | None:
+    """A harmonic rival that one half of the pass, fitted alone, does not clearly reject.
+
+    Each half of the scored magnitudes is fitted at the best's and at every harmonically
+    related repeating rival's frequency, with their harmonic counts and a common trend no more
+    flexible than the longer period allows in the half. A confident period must beat each rival
+    in both halves by at least half the BIC margin: a copy of the pass truncated to either half
+    must not come to a different choice, and a feature seen in one half only (a light curve
+    whose halves differ early in the pass and look alike later) does not make a confident claim.
+
+    Returns
+    -------
+    (rival, BIC difference in the first half, in the second) for the rival with the smallest
+    difference below half the margin, or None when both halves prefer the best by that much.
+    """
+    data, settings = problem.data, problem.settings
+    # Only rivals that repeat at least one and a half times in a half can be judged there.
+    rivals = [
+        (candidate, scored)
+        for candidate, scored in by_candidate.items()
+        if scored is not best
+        and not scored.degenerate
+        and problem.cycles(scored) >= HALF_CYCLES * 2
+        and scored.bic - best.bic < settings.refine_margin
+        and _harmonic_ratio(scored.fit.period_s, best.fit.period_s)
+    ]
+    if not rivals:
+        return None
+    mid = 0.5 * (data.t_s[0] + data.t_s[-1])
+    deltas = {id(scored): [] for _, scored in rivals}
+    for half in (data.t_s <= mid, data.t_s > mid):
+        t = data.t_s[half]
+        span = t[-1] - t[0] if t.size > 1 else 0.0
+        full = SeriesData.from_arrays(t, data.y[half], data.weight[half], settings.trend_degree)
+
+        def criterion(fit: HarmonicFit) -> float:
+            # Each model with the trend its own period allows in the half, as in the full pass.
+            degree = trend_degree_limit(fit.frequency_hz * span, full.n_points, settings.trend_degree)
+            sub = full.with_trend_degree(min(degree, full.trend_degree))
+            curve = nested_rss(sub, fit.frequency_hz, fit.n_harmonics)
+            return float(bic(curve[-1], sub.n_points, fit.n_harmonics, sub.trend_degree))
+
+        reference = criterion(best.fit)
+        for _, scored in rivals:
+            deltas[id(scored)].append(criterion(scored.fit) - reference)
+    worst = None
+    for candidate, scored in rivals:
+        first, second = deltas[id(scored)]
+        if min(first, second) < 0.5 * settings.bic_margin and (
+            worst is None or min(first, second) < min(worst[1], worst[2])
+        ):
+            worst = (candidate, first, second)
+    return worst
+
+
+def _conservative_rival(problem: _Problem, best: _Scored, model: HarmonicFit, by_candidate: dict):
+    """The best rival under the conservative treatment of correlated residuals, if within the margin.
+
+    Generalised least squares trusts the AR(1) model of the residuals. Residual structure that
+    AR(1) does not describe (a shape changing during the pass, slow non-repeating swings) can
+    make it overconfident, so a confident period must also win when the correlation is counted
+    as if it held at every frequency: the raw magnitudes' BIC with the effective sample size
+    ``n (1 - rho) / (1 + rho)`` (Bayley & Hammersley 1946) of the best model's raw residuals,
+    the harmonic count chosen again under it.
+
+    Returns
+    -------
+    (Candidate, BIC difference to the best) or None.
+    """
+    rho = min(max(model.residual_lag1, 0.0), RHO_MAX)
+    if rho <= RHO_STEP:
+        return None
+    n = problem.raw.n_points
+    n_effective = n * (1 - rho) / (1 + rho)
+
+    def criterion(scored: _Scored) -> float:
+        fit = scored.fit
+        curve = nested_rss(problem.raw.with_trend_degree(scored.trend_degree), fit.frequency_hz, fit.n_harmonics)
+        values = bic(curve[1:], n, np.arange(1, fit.n_harmonics + 1), scored.trend_degree, n_effective)
+        return float(np.min(values))
+
+    reference = criterion(best)
+    worst = None
+    for candidate, scored in by_candidate.items():
+        if scored is best or scored.degenerate:
+            continue
+        delta = criterion(scored) - reference
+        if delta < problem.settings.bic_margin and (worst is None or delta < worst[1]):
+            worst = (candidate, delta)
+    return worst

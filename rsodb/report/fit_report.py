@@ -1,17 +1,23 @@
-"""The campaign report: every stored fit of one object, parameters against date, the fitted
-spin period beside the periodogram's, and each pass's observed and best-fit light curves."""
+"""The report of one object's fits: spin period and parameters against date, a table of every
+pass with its trust level, and per pass the spin state with intervals, the verdicts in words,
+the observed curve with the posterior band and residuals, corner and trace plots, and the
+period search's periodogram and folded curve."""
 
 from __future__ import annotations
 
-import html
 import math
 
 import numpy as np
 
 from rsodb.campaign.period_survey import load_period_results
-from rsodb.fit.plots import lightcurve_figure
+from rsodb.fit.plots import corner_figure, lightcurve_figure, trace_figure
 from rsodb.fit.result import FitResult
+from rsodb.periods.lightcurve import LightCurve
+from rsodb.plotting import magnitude_label
 from rsodb.report.html import Document, Heading, Paragraph, Raw, Table, anchor, figure_from_matplotlib
+from rsodb.report.period_report import pass_figure
+from rsodb.report.spin_state import axis_text, spin_state_rows
+from rsodb.report.trust import assess
 
 __all__ = [
     "build_campaign_report",
@@ -24,7 +30,7 @@ __all__ = [
 def load_fits(archive, norad: int, name: str = "default", band: str | None = None) -> list:
     """The stored `FitResult` of every pass of an object that has a fit called `name`, by date."""
     results = []
-    for row in archive.catalog(norad, band):
+    for row in archive.summaries(norad, band):
         if name in archive.result_names(row.pass_id, "fits"):
             results.append(archive.load_result(row.pass_id, "fits", name, FitResult.from_hdf5))
     return results
@@ -139,7 +145,8 @@ def _table(results, periods_by_id) -> Table:
                 _cell(r.reduced_chi2, ".2f"),
                 _cell(r.jitter_mag, ".3f"),
                 "yes" if r.converged else "no",
-                "; ".join(f.split(":")[0] for f in r.flags) or "-",
+                axis_text(r),
+                assess(r, p).text(),
             )
         )
     return Table(
@@ -153,10 +160,12 @@ def _table(results, periods_by_id) -> Table:
             "red. chi2",
             "jitter [mag]",
             "converged",
-            "flags",
+            "spin axis",
+            "trust",
         ),
         tuple(rows),
         numeric=frozenset({2, 5, 6, 7}),
+        sortable=True,
     )
 
 
@@ -188,12 +197,17 @@ def build_campaign_report(
     ValueError
         When the object has no stored fits of that name.
     """
-    rows = archive.catalog(norad, band)
+    rows = archive.summaries(norad, band)
     results = load_fits(archive, norad, name, band)
     if not results:
+        others = sorted({n for row in rows for n in archive.result_names(row.pass_id, "fits")})
+        fix = (
+            f"its fits are named {', '.join(map(repr, others))}: give --name {others[0]}"
+            if others
+            else f"run 'rsodb campaign --archive {archive.path} --object {norad}' first"
+        )
         raise ValueError(
-            f"object {norad} has no fits named {name!r} in {str(archive.path)!r} ({len(rows)} passes stored); "
-            f"run 'rsodb campaign --archive {archive.path} --object {norad}' first"
+            f"object {norad} has no fits named {name!r} in {str(archive.path)!r} ({len(rows)} passes stored); {fix}"
         )
     periods = load_period_results(archive, norad, periods_name, band)
     periods_by_id = {p.pass_id: p for p in periods}
@@ -244,17 +258,70 @@ def build_campaign_report(
     )
     if pass_figures:
         for r in results:
-            doc = doc.add(
-                Heading(f"Pass {r.pass_id}"),
-                Paragraph(r.verdict, css_class="meta"),
-                Raw("<pre>" + _escape(r.table()) + "</pre>"),
-                figure_from_matplotlib(
-                    lightcurve_figure(r),
-                    "Observed magnitudes with errors, the best-fit synthetic light curve, and the residuals.",
-                ),
-            )
+            doc = doc.add(*_pass_section(archive, r, periods_by_id.get(r.pass_id)))
     return doc
 
 
-def _escape(text: str) -> str:
-    return html.escape(text)
+def _pass_section(archive, fit, period) -> list:
+    """The blocks of one pass: trust and verdicts in words, the spin-state table, the observed
+    curve with the posterior band, corner and trace plots, and the period search's figure."""
+    trust = assess(fit, period)
+    blocks = [
+        Heading(f"Pass {fit.pass_id}"),
+        Paragraph(f"Trust: {trust.text()}.", css_class=f"trust-{trust.level}"),
+        Paragraph(f"Convergence: {fit.verdict}"),
+    ]
+    blocks += [Paragraph(f"Warning: {flag}", css_class="meta") for flag in fit.flags]
+    if fit.selection:
+        blocks.append(Paragraph(f"Fitted: {fit.selection}.", css_class="meta"))
+    blocks.append(
+        Table(
+            ("quantity", "median -/+ (16-84%)", "unit", "meaning"),
+            tuple(spin_state_rows(fit)),
+            caption=f"Spin state of fit {fit.name!r}"
+            + (f" (phases at {fit.epoch_utc} UTC, the fitted window's mid-time)" if fit.epoch_utc else ""),
+        )
+    )
+    try:
+        stored = archive.get(fit.pass_id)
+    except (LookupError, ValueError) as error:
+        stored, unavailable = None, error
+    mag_label = magnitude_label(stored.band, stored.mag_convention) if stored is not None else "magnitude"
+    blocks.append(
+        figure_from_matplotlib(
+            lightcurve_figure(fit, mag_label=mag_label),
+            "The whole pass: observed magnitudes, the model as a continuous curve with the band of its posterior "
+            "draws, the fitted window shaded, and the residual of every sample.",
+        )
+    )
+    blocks.append(
+        figure_from_matplotlib(
+            corner_figure(fit),
+            "Posterior of the free parameters (stored draws): 16, 50 and 84% marked.",
+            dpi=80,
+        )
+    )
+    try:
+        blocks.append(
+            figure_from_matplotlib(
+                trace_figure(fit), "Every walker's trace per parameter; the burn-in dropped is shaded.", dpi=80
+            )
+        )
+    except (FileNotFoundError, OSError) as error:
+        blocks.append(Paragraph(f"No trace plot: {error}", css_class="meta"))
+    if period is None:
+        blocks.append(Paragraph("No period search stored for this pass.", css_class="meta"))
+        return blocks
+    blocks.append(Paragraph(f"Period search: {period.summary()}", css_class="meta"))
+    if stored is None:
+        blocks.append(Paragraph(f"No periodogram: the pass's data are unavailable ({unavailable}).", css_class="meta"))
+        return blocks
+    blocks.append(
+        figure_from_matplotlib(
+            pass_figure(period, LightCurve.from_pass(stored)),
+            "Period search of the same pass. Top: magnitudes with the Fourier model and trend. Left: Lomb-Scargle "
+            "power with the peak and the chosen period. Right: folded on the chosen period, trend removed, "
+            "coloured by cycle.",
+        )
+    )
+    return blocks

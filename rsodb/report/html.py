@@ -23,7 +23,7 @@ import numpy as np
 
 from rsodb.plotting import pyplot
 
-__all__ = ["Document", "Heading", "Paragraph", "Figure", "Table", "Raw", "figure_from_matplotlib", "anchor"]
+__all__ = ["Document", "Heading", "Paragraph", "Figure", "Table", "Link", "Raw", "figure_from_matplotlib", "anchor"]
 
 _STYLE = """
 body { font-family: -apple-system, "Segoe UI", Helvetica, Arial, sans-serif; margin: 2em auto;
@@ -39,6 +39,37 @@ figure { margin: 1em 0; }
 figure img { max-width: 100%; border: 1px solid #ddd; }
 figcaption { font-size: .85em; color: #555; }
 .meta { color: #666; font-size: .85em; }
+table.sortable th { cursor: pointer; user-select: none; }
+table.sortable th::after { content: " \\2195"; color: #999; font-size: .8em; }
+.trust-high { background: #e3f4e3; } .trust-medium { background: #fdf3d8; }
+.trust-low { background: #fbe0dc; } .trust-none { background: #eee; }
+"""
+
+# Click a header of a sortable table to sort by that column (again: reverse). Cells that read
+# as numbers sort as numbers; cells without a value ("-") sort last either way.
+_SORT_SCRIPT = """
+document.querySelectorAll("table.sortable").forEach(function (table) {
+  table.querySelectorAll("th").forEach(function (th, column) {
+    th.addEventListener("click", function () {
+      var body = table.tBodies[0], rows = Array.from(body.rows);
+      var up = th.dataset.order !== "up";
+      table.querySelectorAll("th").forEach(function (h) { delete h.dataset.order; });
+      th.dataset.order = up ? "up" : "down";
+      function key(row) {
+        var text = row.cells[column].dataset.sort || row.cells[column].textContent.trim();
+        var number = parseFloat(text);
+        return text === "-" || text === "" ? null : (isNaN(number) ? text.toLowerCase() : number);
+      }
+      rows.sort(function (a, b) {
+        var x = key(a), y = key(b);
+        if (x === null || y === null) { return (x === null) - (y === null); }
+        if (typeof x !== typeof y) { x = String(x); y = String(y); }
+        return (x < y ? -1 : x > y ? 1 : 0) * (up ? 1 : -1);
+      });
+      rows.forEach(function (row) { body.appendChild(row); });
+    });
+  });
+});
 """
 
 
@@ -93,22 +124,49 @@ class Figure:
 
 
 @dataclass(frozen=True)
+class Link:
+    """A table cell that links to `href` (another report, or an anchor in one)."""
+
+    text: str
+    href: str
+
+    def __str__(self) -> str:
+        return self.text
+
+    def to_html(self) -> str:
+        return f'<a href="{html.escape(self.href)}">{html.escape(self.text)}</a>'
+
+
+def _cell_html(cell) -> str:
+    return cell.to_html() if isinstance(cell, Link) else html.escape(cell)
+
+
+@dataclass(frozen=True)
 class Table:
-    """A table of text cells; columns listed in `numeric` are right-aligned."""
+    """A table of text cells; columns listed in `numeric` are right-aligned.
+
+    A `sortable` table sorts by a column when its header is clicked. `row_classes` gives each
+    row a CSS class (e.g. ``"trust-low"``), or is empty.
+    """
 
     columns: tuple[str, ...]
     rows: tuple[tuple[str, ...], ...]
     caption: str = ""
     numeric: frozenset[int] = field(default_factory=frozenset)
+    sortable: bool = False
+    row_classes: tuple[str, ...] = ()
 
     def __post_init__(self):
         object.__setattr__(self, "columns", tuple(str(c) for c in self.columns))
-        rows = tuple(tuple(str(cell) for cell in row) for row in self.rows)
+        rows = tuple(tuple(cell if isinstance(cell, Link) else str(cell) for cell in row) for row in self.rows)
         for i, row in enumerate(rows):
             if len(row) != len(self.columns):
                 raise ValueError(f"table row {i} has {len(row)} cells but there are {len(self.columns)} columns")
         object.__setattr__(self, "rows", rows)
         object.__setattr__(self, "numeric", frozenset(self.numeric))
+        object.__setattr__(self, "row_classes", tuple(self.row_classes))
+        if self.row_classes and len(self.row_classes) != len(rows):
+            raise ValueError(f"{len(self.row_classes)} row classes for {len(rows)} rows")
 
     @classmethod
     def from_pandas(cls, frame, caption: str = "", float_format: str = "{:.4g}") -> Table:
@@ -125,17 +183,19 @@ class Table:
 
     def to_html(self) -> str:
         head = "".join(f"<th>{html.escape(c)}</th>" for c in self.columns)
+        classes = self.row_classes or ("",) * len(self.rows)
         body = "\n".join(
-            "<tr>"
+            (f'<tr class="{html.escape(css)}">' if css else "<tr>")
             + "".join(
-                f'<td class="num">{html.escape(cell)}</td>' if i in self.numeric else f"<td>{html.escape(cell)}</td>"
+                f'<td class="num">{_cell_html(cell)}</td>' if i in self.numeric else f"<td>{_cell_html(cell)}</td>"
                 for i, cell in enumerate(row)
             )
             + "</tr>"
-            for row in self.rows
+            for row, css in zip(self.rows, classes)
         )
         caption = f"<caption>{html.escape(self.caption)}</caption>" if self.caption else ""
-        return f"<table>{caption}<thead><tr>{head}</tr></thead><tbody>\n{body}\n</tbody></table>"
+        opening = '<table class="sortable">' if self.sortable else "<table>"
+        return f"{opening}{caption}<thead><tr>{head}</tr></thead><tbody>\n{body}\n</tbody></table>"
 
 
 Block = Heading | Paragraph | Figure | Table | Raw
@@ -180,6 +240,8 @@ class Document:
     def to_html(self) -> str:
         """The whole page as one string."""
         body = "\n".join(block.to_html() for block in self.blocks)
+        if any(isinstance(block, Table) and block.sortable for block in self.blocks):
+            body += f"\n<script>{_SORT_SCRIPT}</script>"
         return (
             '<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
             f"<title>{html.escape(self.title)}</title>\n<style>{_STYLE}</style>\n</head>\n<body>\n"

@@ -77,7 +77,7 @@ TLES = {
 # The model each object is rendered with (a module of raycast.models with a build() function).
 SHAPES = {22076: "topex", 40358: "cosmos2502"}
 # Visibility grid of the renderer's cache. The fitter's cache uses 32 (directions 2.8 deg apart);
-# 16 builds ~4x faster and changes the light curves by far less than their noise, and data
+# 16 builds several times faster and changes the light curves by far less than their noise, and data
 # rendered with exactly the fitter's model would flatter it.
 CACHE_GRID_SIZE = 16
 CACHE_ACCURACY_MAG = 0.01

@@ -1,24 +1,45 @@
-"""Synthetic ccd_phot corpora: many realistic files, fast, for benchmarks, crash tests and demos.
+"""Synthetic corpora: many realistic files, fast, and whole survey-size archives, for benchmarks,
+crash tests and demos.
 
 Each pass is a spinning object on a plausible overhead pass: elevation rising and falling,
 range from a 1000 km orbit, flux from a two-harmonic spin signal with Poisson-like noise, and
 magnitudes from ccd_phot's reduction ``m = A - 2.5 log10(F/dt) + c X - 5 log10(R/1000 km)``
 with A = 20.0 and c = -0.30 (the correct sign), so the reader's regression recovers A and c.
 Files are written with `ingest.writers.write_ccd_phot`, in the real layout.
+`write_synthetic_archive` builds an archive of many objects directly (no text files): the passes
+go through the archive's own commit path, a round of objects at a time, with one stored period
+result each (`SyntheticPeriod`, the pass's true spin period) for survey queries.
 """
 
 from __future__ import annotations
 
+from concurrent.futures import ProcessPoolExecutor
+import multiprocessing
+import os
 from pathlib import Path
 
+import h5py
 import numpy as np
 
 from ingest.elements import tle_checksum
 from ingest.observation import Pass
 from ingest.site import DERENIVKA, Site
 from ingest.writers import write_ccd_phot
+from rsodb.archive import Archive, layout, versions
+from rsodb.archive.commits import utc_now
+from rsodb.archive.integrity import seal_result
+from rsodb.archive.locking import temp_path
 
-__all__ = ["synthetic_tle", "synthetic_pass", "write_synthetic_corpus", "ZERO_POINT_MAG", "EXTINCTION_TERM_MAG"]
+__all__ = [
+    "synthetic_tle",
+    "synthetic_pass",
+    "write_synthetic_corpus",
+    "write_synthetic_archive",
+    "SyntheticPeriod",
+    "ZERO_POINT_MAG",
+    "EXTINCTION_TERM_MAG",
+    "VERDICTS",
+]
 
 ZERO_POINT_MAG = 20.0
 EXTINCTION_TERM_MAG = -0.30
@@ -121,10 +142,11 @@ def write_synthetic_corpus(
     first_norad: int = 90001,
     variant: str = "ut",
     indices: range | None = None,
+    first_utc: str = "2025-03-01T18:00:00",
 ) -> list[Path]:
     """Write `n_files` ccd_phot files spread round-robin over `n_objects` objects.
 
-    Passes of one object start about five hours apart from 2025-03-01, so ids never collide.
+    Passes of one object start about five hours apart from `first_utc`, so ids never collide.
     File names follow the lab's ``result_<norad>_<YYYYmmdd>_UT<HHMMSS>.phV`` pattern. File k
     depends only on (`seed`, k), so a corpus can be written in parallel pieces.
 
@@ -139,6 +161,8 @@ def write_synthetic_corpus(
         Time columns of the files.
     indices : range, optional
         Write only these files of the corpus (default: all `n_files`).
+    first_utc : str
+        When the first passes start (UTC, ISO 8601).
 
     Returns
     -------
@@ -147,7 +171,7 @@ def write_synthetic_corpus(
     """
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
-    base = np.datetime64("2025-03-01T18:00:00", "ns")
+    base = np.datetime64(first_utc, "ns")
     paths = []
     for k in range(n_files) if indices is None else indices:
         rng = np.random.default_rng([seed, k])
@@ -162,3 +186,125 @@ def write_synthetic_corpus(
             )
         )
     return paths
+
+
+# Verdicts of a period search and how often the synthetic archive gives each.
+VERDICTS = {"confident": 0.55, "ambiguous harmonic": 0.2, "too short": 0.15, "no signal": 0.1}
+
+
+class SyntheticPeriod:
+    """A stored period result with what a period search stores for survey queries: the best
+    period, its error and a verdict (here the synthetic truth, not a search)."""
+
+    def __init__(self, period_s: float, uncertainty_s: float, verdict: str):
+        self.period_s, self.uncertainty_s, self.verdict = period_s, uncertainty_s, verdict
+
+    def to_hdf5(self, group) -> None:
+        group.attrs["best_period_s"] = self.period_s
+        group.attrs["uncertainty_s"] = self.uncertainty_s
+        group.attrs["verdict"] = self.verdict
+        group.attrs["reason"] = "synthetic: the pass's true spin period"
+
+
+def _object_passes(norad: int, n_passes: int, n_points: int, seed: int, first_utc: np.datetime64):
+    """The passes of one object and their period results (object k depends only on (seed, norad))."""
+    rng = np.random.default_rng([seed, norad])
+    passes, periods = [], []
+    verdicts = list(VERDICTS)
+    for k in range(n_passes):
+        start = first_utc + np.timedelta64(int(rng.uniform(0, 365 * 86400)), "s")
+        period_s = float(np.exp(rng.uniform(np.log(2.0), np.log(200.0))))
+        exposure_s = float(rng.choice([0.1, 0.2, 0.5, 1.0]))
+        passes.append(
+            synthetic_pass(
+                norad,
+                start.astype("datetime64[ms]").astype("datetime64[ns]"),
+                n_points,
+                rng,
+                exposure_s=exposure_s,
+                band=str(rng.choice(["V", "V", "B", "R"])),
+                spin_period_s=period_s,
+            ).replace(source_name=f"synthetic_{norad}_{k}")
+        )
+        verdict = verdicts[int(rng.choice(len(verdicts), p=list(VERDICTS.values())))]
+        periods.append(SyntheticPeriod(period_s, period_s * float(rng.uniform(1e-4, 1e-2)), verdict))
+    return passes, periods
+
+
+def _write_objects(args) -> int:
+    """Worker: write the object files of `norads` straight into ``objects/`` (a new archive)."""
+    path, norads, passes_of, n_points, seed, first_utc = args
+    objects = Path(path) / layout.OBJECTS_DIR
+    now = utc_now()
+    for norad in norads:
+        passes, periods = _object_passes(norad, passes_of[norad], n_points, seed, np.datetime64(first_utc, "ns"))
+        final = objects / layout.object_file_name(norad)
+        tmp = temp_path(final)
+        with h5py.File(tmp, "w", libver=layout.LIBVER) as file:
+            layout.write_file_attributes(file, norad)
+            file.attrs["name"], file.attrs["cospar"] = passes[0].name, passes[0].cospar
+            group = file.create_group("passes")
+            rows, results, placed = [], [], {}
+            for pass_, period in zip(passes, periods):
+                pass_ = pass_.replace(source_sha256=layout.memory_sha256(pass_))
+                placement = versions.place(pass_, rows, placed.__getitem__, now)
+                rows = placement.rows
+                pass_id = placement.metadata["pass_id"]
+                placed[pass_id] = layout.samples_table(pass_)
+                layout.write_pass(group, pass_, placement.metadata)
+                result = group[pass_id].create_group("periods").create_group("default")
+                result.attrs["stored_utc"] = now
+                result.attrs["result_type"] = f"{__name__}.SyntheticPeriod"
+                period.to_hdf5(result)
+                attrs = seal_result(result)
+                results.append(layout.result_summary(pass_id, "periods", "default", result, attrs))
+            layout.write_catalog(file, sorted(rows, key=lambda row: (row.start_utc, row.pass_id)))
+            layout.write_results(file, results)
+            file.attrs["updated_utc"] = now
+        os.replace(tmp, final)
+    return len(norads)
+
+
+def write_synthetic_archive(
+    path,
+    n_objects: int,
+    n_passes: int,
+    *,
+    n_points: int = 200,
+    seed: int = 0,
+    first_norad: int = 10001,
+    first_utc: str = "2025-01-01T00:00:00",
+    processes: int = 1,
+) -> Archive:
+    """Build an archive of `n_objects` objects holding `n_passes` passes in all, in bulk.
+
+    Passes are spread as evenly as possible over the objects and over a year from `first_utc`;
+    each has `n_points` samples, a random band, exposure and spin period (log-uniform 2-200 s),
+    and a stored period result named "default" (`SyntheticPeriod`) with a verdict drawn from
+    `VERDICTS`. Each object file is written in one go with the archive's own layout functions
+    (`rsodb.archive.layout`; ids by `rsodb.archive.versions.place`), without fsync, in
+    `processes` processes working on disjoint objects; the catalog index is then built from the
+    files, as ``rsodb check`` builds it.
+
+    Returns
+    -------
+    Archive
+        The archive, opened.
+    """
+    if n_objects < 1 or n_passes < n_objects:
+        raise ValueError(f"n_passes={n_passes} must be at least n_objects={n_objects} (>= 1)")
+    if Archive(path).summaries():
+        raise ValueError(f"{path} already holds passes; give a new directory")
+    norads = list(range(first_norad, first_norad + n_objects))
+    passes_of = {norad: n_passes // n_objects + (k < n_passes % n_objects) for k, norad in enumerate(norads)}
+    pieces = [norads[k::processes] for k in range(processes)]
+    tasks = [(str(path), piece, passes_of, n_points, seed, first_utc) for piece in pieces if piece]
+    if processes == 1:
+        for task in tasks:
+            _write_objects(task)
+    else:
+        with ProcessPoolExecutor(processes, mp_context=multiprocessing.get_context("spawn")) as pool:
+            list(pool.map(_write_objects, tasks))
+    archive = Archive(path)
+    archive.rebuild_index()
+    return archive

@@ -1,0 +1,161 @@
+"""The fitted spin period in each of the conventions it is quoted in.
+
+A spin period is a rotation rate about the body's spin axis *relative to some frame*, and the
+frames differ by a few per cent for a precessing satellite (docs/fitting.md, "Which spin
+period?", draws them):
+
+``parameter``
+    The fitted ``spin_period_s``: for the ``precessing`` family, the rate of the spin angle psi,
+    relative to the *precessing* frame (the frame that carries the spin axis round its cone,
+    the project's and the seed paper's convention); for ``inertial``, relative to inertial space.
+``orbit_frame``
+    Relative to the local orbital frame, which does not precess: ``1 / P_orb = 1 / P + cos(theta)
+    / P_pr`` for the precessing family (the spin-axis component of the precession rate; for
+    P = 40.5 s, P_pr = 1620 s, theta = 7 deg the rates differ by 2.5%).
+``inertial``
+    Relative to inertial space (sidereal): the orbit frame's own rotation (one turn per orbit)
+    projected on the spin axis is added.
+``light_curve``
+    The period at which the model's light curve repeats (synodic): relative to the phase-angle
+    bisector, which the observer's motion turns during a pass. This is what a periodogram of
+    the pass measures, and is compared with the stored period.
+
+Each is computed from the fitted attitude itself, not from a formula per family: on a time grid
+over the fitted window (`STEPS_PER_CYCLE` steps per cycle of the fastest spin) the rotation
+from one step to the next (exact axis-angle of ``R_i^T R_(i+1)``) is projected on the body spin
+axis and summed; for ``light_curve`` the bisector's azimuth about the body spin axis is unwrapped.
+Posterior draws give each convention's median and 16/84 percentiles.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from rsodb.fit.curves import geometry_at
+
+__all__ = ["CONVENTIONS", "spin_periods", "rates_hz", "angle_steps_about", "bisector_azimuth"]
+
+CONVENTIONS = {
+    "parameter": "the fitted spin_period_s (precessing: relative to the precessing frame; inertial: sidereal)",
+    "orbit_frame": "relative to the local orbital frame (not precessing): 1/P_orb = 1/P + cos(theta)/P_pr",
+    "inertial": "relative to inertial space (sidereal): the orbit frame's rotation about the spin axis added",
+    "light_curve": "the light curve's repeat period (synodic: relative to the Sun-observer bisector)",
+}
+STEPS_PER_CYCLE = 24
+_MAX_STEPS = 20_000
+_AXES = {"x": 0, "y": 1, "z": 2}
+
+
+def angle_steps_about(rotations: np.ndarray, axis: int) -> np.ndarray:
+    """(n-1,) rotation angle (rad) about body `axis` between consecutive (n, 3, 3) body-to-frame
+    rotations: the axis-angle vector of ``R_i^T R_(i+1)`` projected on the axis."""
+    step = np.einsum("nji,njk->nik", rotations[:-1], rotations[1:])
+    return Rotation.from_matrix(step).as_rotvec()[:, axis]
+
+
+def bisector_azimuth(rotations: np.ndarray, geometry, axis: int) -> np.ndarray:
+    """(n,) unwrapped azimuth (rad) of the Sun-observer bisector about body `axis`, right-handed.
+
+    Parameters
+    ----------
+    rotations : (n, 3, 3) float
+        Body-to-GCRS rotations at the geometry's times.
+    geometry : PassGeometry
+        One sub-sample per time.
+    axis : int
+        0, 1, 2 for body x, y, z.
+    """
+    bisector = np.einsum("nji,nj->ni", rotations, geometry.sun_gcrs[:, 0] + geometry.obs_gcrs[:, 0])
+    # Cyclic order keeps the azimuth right-handed about the axis (x: y->z, y: z->x, z: x->y).
+    first, second = (axis + 1) % 3, (axis + 2) % 3
+    return np.unwrap(np.arctan2(bisector[:, second], bisector[:, first]))
+
+
+def rates_hz(model, values, geometry, axis: str) -> dict[str, float]:
+    """Mean rotation rates (turns per second) about the body `axis` in each convention.
+
+    Parameters
+    ----------
+    model : SpinStateModel
+    values : mapping
+        Parameter values.
+    geometry : PassGeometry
+        A fine time grid over the window, one sub-sample per time.
+    axis : {"x", "y", "z"}
+    """
+    k = _AXES[axis]
+    attitude = model.on(geometry).attitude_model(values)
+    lvlh = geometry.lvlh_gcrs[:, 0]
+    rotations = attitude.orientation(geometry.t_s, lvlh)
+    span = float(geometry.t_s[-1] - geometry.t_s[0])
+    inertial = float(np.sum(angle_steps_about(rotations, k))) / span
+    relative = np.einsum("nji,njk->nik", lvlh, rotations)
+    orbit = float(np.sum(angle_steps_about(relative, k))) / span
+    azimuth = bisector_azimuth(rotations, geometry, k)
+    light = -float(azimuth[-1] - azimuth[0]) / span
+    turn = 2 * math.pi
+    return {"orbit_frame": orbit / turn, "inertial": inertial / turn, "light_curve": light / turn}
+
+
+def _summary(periods: np.ndarray) -> dict:
+    p16, median, p84 = np.percentile(periods, [16, 50, 84])
+    return {"median": float(median), "p16": float(p16), "p84": float(p84)}
+
+
+def spin_periods(model, space, draws, observed, window_time_utc, attitude: str, axis: str, periods=None) -> dict:
+    """The spin period in every convention, over posterior draws.
+
+    Parameters
+    ----------
+    model : SpinStateModel
+        The fitted forward model (any times; its epoch is kept).
+    space : ParameterSpace
+    draws : (d, ndim) float
+        Posterior draws (a few hundred are plenty).
+    observed : Pass
+        For the orbit and site.
+    window_time_utc : (2,) datetime64
+        First and last sample of the fitted window.
+    attitude : str
+        The attitude family.
+    axis : str
+        The body spin axis (precessing, inertial).
+    periods : PeriodResult, optional
+        The stored period, quoted beside the light-curve convention.
+
+    Returns
+    -------
+    dict
+        ``{"attitude", "spin_axis", "definitions", "conventions": {name: {median, p16, p84}},
+        "periodogram_period_s", "periodogram_uncertainty_s"}``; ``conventions`` holds only
+        ``parameter`` for a tumbling (torque-free) body, whose spin axis moves in the body.
+    """
+    draws = np.asarray(draws, dtype=float)
+    values = [space.values(theta) for theta in draws]
+    parameter = np.array([v["spin_period_s"] for v in values])
+    record = {
+        "attitude": attitude,
+        "spin_axis": axis if attitude != "torque_free" else None,
+        "definitions": dict(CONVENTIONS),
+        "conventions": {"parameter": _summary(parameter)},
+        "periodogram_period_s": None,
+        "periodogram_uncertainty_s": None,
+    }
+    if periods is not None and math.isfinite(periods.best_period_s):
+        record["periodogram_period_s"] = float(periods.best_period_s)
+        record["periodogram_uncertainty_s"] = float(periods.uncertainty_s)
+    if attitude == "torque_free":
+        return record
+    start, end = (np.datetime64(t, "ns") for t in window_time_utc)
+    span_s = float((end - start) / np.timedelta64(1, "s"))
+    fastest = float(np.min(np.abs(parameter)))
+    count = int(min(_MAX_STEPS, max(16, math.ceil(span_s / fastest * STEPS_PER_CYCLE) + 1)))
+    times = start + (np.linspace(0.0, span_s, count) * 1e9).round().astype("int64").astype("timedelta64[ns]")
+    geometry = geometry_at(observed, times, 0.0, 1, None)
+    rates = [rates_hz(model, v, geometry, axis) for v in values]
+    for name in ("orbit_frame", "inertial", "light_curve"):
+        record["conventions"][name] = _summary(np.array([1.0 / r[name] for r in rates]))
+    return record

@@ -1,0 +1,141 @@
+"""Any mesh can be fitted: a mesh file in the fit configuration, its shape cache kept on disk by
+content and reused, articulations, and the published workflow's mesh read from its own file.
+
+Authority for the mesh path: a box written as an OBJ renders as the analytic Lambertian box
+(`ConvexFacets.box`, I/E = sum A rho / pi cos i cos e over the faces): a convex body has no
+shadows, so the cache is exact on it.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from ingest import read_file
+from rsodb.fit import shape_store
+from rsodb.fit.config import FitConfig
+from rsodb.fit.coverage import window
+from rsodb.fit.runner import FitProblem
+from rsodb.fit.shape_store import ShapeStore
+from rsodb.fit.shapes import mesh_shape
+from tests.conftest import MODELS, PROJECT_ROOT, TOPEX_PHV
+
+BOX_FACES = [(1, 2, 3, 4), (5, 8, 7, 6), (1, 5, 6, 2), (2, 6, 7, 3), (3, 7, 8, 4), (4, 8, 5, 1)]
+
+
+def write_box(directory, name="box", z_half=1.0, albedo=0.2):
+    """A 1 x 1 x 2 m box (as `ConvexFacets.box`) as OBJ + materials JSON, outward faces."""
+    corners = [(-0.5, -0.5, -z_half), (0.5, -0.5, -z_half), (0.5, 0.5, -z_half), (-0.5, 0.5, -z_half)]
+    corners += [(x, y, z_half) for x, y, _ in corners]
+    lines = ["o body", "usemtl paint"] + [f"v {x} {y} {z}" for x, y, z in corners]
+    # Faces wound counter-clockwise seen from outside (bottom face seen from below, etc.).
+    lines += ["f 1 4 3 2", "f 5 6 7 8", "f 1 2 6 5", "f 2 3 7 6", "f 3 4 8 7", "f 4 1 5 8"]
+    obj = directory / f"{name}.obj"
+    obj.write_text("\n".join(lines) + "\n")
+    materials = directory / f"{name}.materials.json"
+    materials.write_text(json.dumps({"materials": {"paint": {"blender_node": "Diffuse BSDF", "color": [albedo] * 3}}}))
+    return obj, materials
+
+
+@pytest.fixture(scope="module")
+def template():
+    return window(read_file(TOPEX_PHV)[0], 0.0, 20.0, bin_size=4)
+
+
+PRIOR = {"spin_period_s": {"kind": "uniform", "low": 9.5, "high": 10.2}, "jitter_mag": 0.0}
+VALUES = {
+    "spin_period_s": 9.86,
+    "spin_phase_deg": 20.0,
+    "precession_period_s": 700.0,
+    "precession_phase_deg": 50.0,
+    "precession_angle_deg": 30.0,
+}
+
+
+def test_a_box_mesh_file_fits_as_the_analytic_box(tmp_path, template):
+    obj, materials = write_box(tmp_path)
+    record = {"model": {"mesh": str(obj), "materials": str(materials), "n_sub": 1}, "parameters": PRIOR}
+    store = ShapeStore(tmp_path / "shapes")
+    mesh_problem = FitProblem.build(template, FitConfig.from_dict(record), store=store)
+    box = FitProblem.build(template, FitConfig.from_dict({"model": {"shape": "box", "n_sub": 1}, "parameters": PRIOR}))
+    assert mesh_problem.shape == "mesh:box.obj"
+    mesh_mag = mesh_problem.posterior.model.magnitudes(VALUES)
+    box_mag = box.posterior.model.magnitudes(VALUES)
+    # Exact in both up to float32 sums in the cache: 1e-4 mag.
+    np.testing.assert_allclose(mesh_mag, box_mag, atol=1e-4)
+    assert len(list((tmp_path / "shapes").glob("*.pkl"))) == 1
+
+
+def test_the_stored_cache_is_reused_and_keyed_by_content(tmp_path, template, monkeypatch):
+    obj, materials = write_box(tmp_path)
+    record = {"model": {"mesh": str(obj), "materials": str(materials), "n_sub": 1}, "parameters": PRIOR}
+    store = ShapeStore(tmp_path / "shapes")
+    FitProblem.build(template, FitConfig.from_dict(record), store=store)
+    shape_store._MEMORY.clear()  # as in a new process (a campaign worker)
+
+    def no_build(*args, **kwargs):
+        raise AssertionError("the cache was built again")
+
+    monkeypatch.setattr("rsodb.fit.shapes._build_cache", no_build)
+    # The same content under another file name: the stored cache, not a new build.
+    copy = tmp_path / "copy"
+    copy.mkdir()
+    other_obj, other_materials = write_box(copy, name="renamed")
+    renamed = {"model": {"mesh": str(other_obj), "materials": str(other_materials), "n_sub": 1}, "parameters": PRIOR}
+    FitProblem.build(template, FitConfig.from_dict(renamed), store=ShapeStore(tmp_path / "shapes"))
+    # Other content (a longer box): another key.
+    longer_obj, longer_materials = write_box(copy, name="longer", z_half=1.5)
+    scene = mesh_shape(obj, materials).build()
+    longer = mesh_shape(longer_obj, longer_materials).build()
+    assert store.key(scene, {}) != store.key(longer, {}) and store.key(scene, {}) == store.key(scene, {})
+
+
+def test_articulations_of_a_mesh_are_parameters(tmp_path, template):
+    obj, materials = write_box(tmp_path)
+    text = (
+        obj.read_text() + "o flap\nusemtl paint\nv 0.5 -0.5 1\nv 1.5 -0.5 1\nv 1.5 0.5 1\nv 0.5 0.5 1\nf 9 10 11 12\n"
+    )
+    obj.write_text(text)
+    articulation = {"parameter": "flap_deg", "part": "flap", "axis": [0, 1, 0], "point_m": [0.5, 0, 1], "rest_deg": 0}
+    record = {
+        # The direct renderer: no articulation grid of caches to build for a test of the wiring.
+        "model": {
+            "mesh": str(obj),
+            "materials": str(materials),
+            "articulations": [articulation],
+            "n_sub": 1,
+            "renderer": "direct",
+        },
+        "parameters": dict(PRIOR, flap_deg={"kind": "uniform", "low": -30.0, "high": 30.0}),
+    }
+    problem = FitProblem.build(template, FitConfig.from_dict(record))
+    assert "flap_deg" in problem.posterior.space.names
+    flat = problem.posterior.model.magnitudes(dict(VALUES, flap_deg=0.0))
+    tilted = problem.posterior.model.magnitudes(dict(VALUES, flap_deg=25.0))
+    # Samples where no lit face is seen are infinitely faint in both; elsewhere the flap turns
+    # and the light curve changes.
+    seen = np.isfinite(flat) & np.isfinite(tilted)
+    assert seen.sum() > 10 and np.max(np.abs(flat - tilted)[seen]) > 0.01
+
+
+def test_bad_mesh_configuration_names_the_file(tmp_path, template):
+    record = {"model": {"mesh": str(tmp_path / "missing.obj")}, "parameters": PRIOR}
+    with pytest.raises(FileNotFoundError, match=r"\[model\] mesh = '.*missing\.obj' does not exist"):
+        FitProblem.build(template, FitConfig.from_dict(record))
+    with pytest.raises(ValueError, match=r"parameter 'flap' must be a name ending in _deg"):
+        FitConfig.from_dict(
+            {"model": {"mesh": "x.obj", "articulations": [{"parameter": "flap", "part": "p", "axis": [0, 0, 1]}]}}
+        )
+
+
+def test_the_paper_mesh_is_fitted_from_its_own_file(shared_data):
+    config = FitConfig.from_toml(PROJECT_ROOT / "configs" / "cosmos2502_paper.toml")
+    # The configuration's relative paths resolve to ../shared/data, the file itself.
+    assert config.model.mesh == str((MODELS / "cosmos2502_lotos.obj").resolve())
+    assert config.model.materials == str((MODELS / "cosmos2502_lotos.materials.json").resolve())
+    assert config.model.spin_axis == "x"
+    scene = mesh_shape(config.model.mesh, config.model.materials).build()
+    assert scene.n_triangles == 2184 and "spb_2" in scene.material_names
+    assert not list(PROJECT_ROOT.rglob("cosmos2502_lotos.obj"))  # never copied into the repository
