@@ -114,8 +114,8 @@ def test_renderers_agree_with_cycles(scenes, name):
     # reference here has the noise just estimated (two passes), allowed for twice.
     assert rms(delta[tumble_rows]) <= 0.005 + 2 * noise, delta
     assert rms(delta[len(tumble) :]) <= 0.02 + 2 * noise, delta
-    if name.startswith("paper"):
-        return  # the fast path on the paper's mesh is in bench/render.py --scenes (its build takes minutes)
+    if name not in ("plate", "cylinder"):
+        return  # the fast path on the others is in bench/render.py --scenes (its build takes 20 s to minutes)
     cache = SceneCache.build(scene)
     cached = mag_difference(cache.intensity(tumble.sun_body, tumble.obs_body), cycles.intensity_m2_sr[tumble_rows])
     # The fast path's target: 0.01 mag RMS on tumble frames.
