@@ -24,6 +24,7 @@ COMMAND_MODULES = [
     "report",
     "fit",
     "campaign",
+    "ladder",
     "pipeline",
 ]
 

@@ -1,0 +1,93 @@
+"""``rsodb ladder --archive DIR --config LADDER.toml``: fit a ladder of models to passes and choose."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import rsodb
+from rsodb.cli.archive_options import add_archive_option, fail, open_archive
+
+__all__ = ["register", "run"]
+
+EXAMPLE = """\
+examples:
+  rsodb ladder --archive archive --config configs/real_passes.toml
+  rsodb ladder --archive archive --config configs/real_passes.toml --object 22076 --report ladder.html
+  rsodb ladder --archive archive --config configs/real_passes.toml --scheduler tcp://head-node:8786
+  rsodb ladder --archive archive --config configs/real_passes.toml --score-only --json
+
+Each rung (shape x attitude family) is fitted on the first part of each pass ([ladder]
+train_fraction) and stored as the fit <ladder name>.<shape>-<attitude>; its held-out RMS is
+measured on the rest. The simplest rung within the margin of the best held-out RMS is chosen
+(docs/real_passes.md). Rungs already stored are not refitted (--restart refits them), so a
+stopped ladder continues where it stopped. Without --passes or --object every pass is laddered.
+"""
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "ladder",
+        help="fit a ladder of shapes and attitude families to passes; choose by held-out RMS",
+        description="Fit every rung of a model ladder to the first part of each pass (a Dask campaign), score "
+        "each rung by its RMS on the held-out rest, and choose the simplest rung within the margin of the best.",
+        epilog=EXAMPLE,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    add_archive_option(parser)
+    parser.add_argument("--config", required=True, metavar="LADDER.toml", help="ladder configuration")
+    parser.add_argument("--object", type=int, metavar="NORAD", help="only the passes of this object")
+    parser.add_argument("--passes", nargs="+", metavar="PASS", help="only these passes (ids or prefixes)")
+    parser.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler address (default: a LocalCluster)")
+    parser.add_argument("--workers", type=int, metavar="N", help="LocalCluster workers (default: one per core)")
+    parser.add_argument("--in-process", action="store_true", help="fit here, one rung after another, without Dask")
+    parser.add_argument("--restart", action="store_true", help="refit rungs that already have a stored fit")
+    parser.add_argument("--score-only", action="store_true", help="fit nothing; score the stored rungs")
+    parser.add_argument("--report", metavar="FILE.html", help="write the ladder report here when done")
+    parser.add_argument("--json", action="store_true", help="print the ladders as JSON")
+    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        archive = open_archive(args)
+        plan = rsodb.campaign.LadderPlan.from_toml(args.config)
+        if args.workers is not None and args.workers < 1:
+            raise ValueError(f"--workers {args.workers} must be at least 1")
+        if args.passes:
+            pass_ids = [archive.get(p).pass_id for p in args.passes]
+        else:
+            pass_ids = [row.pass_id for row in archive.catalog(args.object)]
+        if not pass_ids:
+            raise LookupError(f"the archive has no passes{f' of NORAD {args.object}' if args.object else ''}")
+        if args.score_only:
+            ladders = [rsodb.campaign.score_ladder(archive, p, plan) for p in pass_ids]
+        else:
+            ladders = rsodb.campaign.run_ladder(
+                archive,
+                pass_ids,
+                plan,
+                scheduler=args.scheduler,
+                n_workers=args.workers,
+                in_process=args.in_process,
+                restart=args.restart,
+                progress=not (args.quiet or args.json),
+            )
+        report_path = None
+        if args.report:
+            report_path = rsodb.report.build_ladder_report(archive, ladders).write(args.report)
+    except (ValueError, TypeError, OSError, LookupError) as error:
+        return fail("ladder", error)
+    if args.json:
+        print(
+            json.dumps(
+                {"ladders": [ladder.to_dict() for ladder in ladders], "report": report_path and str(report_path)},
+                indent=1,
+            )
+        )
+    else:
+        print("\n\n".join(ladder.table() for ladder in ladders))
+        if report_path:
+            print(f"wrote {report_path}")
+    return 0
