@@ -13,7 +13,7 @@ and its margin.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import math
 from pathlib import Path
 import tomllib
@@ -30,7 +30,16 @@ from rsodb.fit.runner import fit_pass, load_periods
 from rsodb.fit.selection import usable_samples
 from rsodb.fit.shapes import SHAPES
 
-__all__ = ["Rung", "RungScore", "LadderSettings", "LadderPlan", "LadderResult", "run_ladder", "score_ladder"]
+__all__ = [
+    "Rung",
+    "RungScore",
+    "LadderSettings",
+    "LadderPlan",
+    "LadderResult",
+    "run_ladder",
+    "score_ladder",
+    "choose_rung",
+]
 
 # Detail of a shape and an attitude family, for ordering rungs of equal parameter count.
 SHAPE_RANK = MappingProxyType({"ellipsoid": 0, "lopsided": 0, "box": 1})
@@ -39,6 +48,8 @@ ATTITUDE_RANK = MappingProxyType({"inertial": 0, "precessing": 1, "torque_free":
 # Shapes that look the same after half a turn about their spin axis: their light curve repeats
 # twice per spin, so their spin period is twice the light curve's.
 HALF_TURN_SYMMETRIC = frozenset({"ellipsoid", "box"})
+# Fewest bootstrap blocks in the held-out part (blocks are shortened to keep this many).
+MIN_BLOCKS = 10
 
 
 @dataclass(frozen=True)
@@ -82,6 +93,9 @@ class Rung:
         record.update(name=f"{ladder}.{self.name}", parameters=parameters)
         record["model"] = dict(record["model"], shape=self.shape, attitude=self.attitude, mesh="", materials="")
         record["data"] = dict(record["data"], start_s=0.0, duration_s=float(duration_s))
+        # emcee's stretch move needs more than twice as many walkers as free parameters (+ jitter).
+        walkers = 2 * (len(ATTITUDES[self.attitude].parameters) + 1) + 2
+        record["sampler"] = dict(record["sampler"], n_walkers=max(base.sampler.n_walkers, walkers))
         return FitConfig.from_dict(record)
 
 
@@ -382,33 +396,58 @@ def score_ladder(archive, pass_id: str, plan: LadderPlan, failures: Mapping[str,
         scores.append((score, order))
         residuals[rung.name] = heldout
     scores = [s for s, _ in sorted(scores, key=lambda pair: _complexity(*pair))]
-    scored = [s for s in scores if s.ok]
-    if not scored:
-        return LadderResult(
-            observed.pass_id, plan.settings.name, tuple(scores), "", "", plan.settings.margin_floor_mag, train_end
-        )
-    best = min(scored, key=lambda s: s.heldout_rms_mag)
     periods = load_periods(archive, observed.pass_id)
     cadence = float(np.median(np.diff(observed.t_s))) if len(observed) > 1 else 1.0
     block = (
         round(periods.best_period_s / cadence) if periods is not None and math.isfinite(periods.best_period_s) else 1
     )
-    rng = np.random.default_rng(plan.settings.seed)
+    scores, chosen, best = choose_rung(scores, residuals, block, plan.settings)
+    return LadderResult(
+        observed.pass_id, plan.settings.name, scores, chosen, best, plan.settings.margin_floor_mag, train_end
+    )
+
+
+def choose_rung(
+    scores: Sequence[RungScore], residuals: Mapping[str, np.ndarray], block: int, settings: LadderSettings
+) -> tuple[tuple[RungScore, ...], str, str]:
+    """Standard errors of the held-out differences and the choice.
+
+    Parameters
+    ----------
+    scores : sequence of RungScore
+        Simplest first.
+    residuals : mapping of rung name to (n,) float
+        Held-out residuals of every scored rung (the same samples for all).
+    block : int
+        Samples per bootstrap block (a light-curve period; shortened to keep `MIN_BLOCKS` blocks).
+    settings : LadderSettings
+        ``margin_floor_mag``, ``bootstrap``, ``seed``.
+
+    Returns
+    -------
+    (scores with ``heldout_se_mag``, chosen rung, best rung); both names are "" when no rung scored.
+    """
+    scored = [s for s in scores if s.ok]
+    if not scored:
+        return tuple(scores), "", ""
+    best = min(scored, key=lambda s: s.heldout_rms_mag)
     reference = residuals[best.rung]
-    with_se = []
+    # At least MIN_BLOCKS blocks, or every resample is the same block and the error reads as zero.
+    block = max(1, min(int(block), reference.size // MIN_BLOCKS))
+    rng = np.random.default_rng(settings.seed)
+    picks = [_block_indices(reference.size, block, rng) for _ in range(settings.bootstrap)]
+    with_se, chosen = [], ""
     for s in scores:
         if s.ok and s.rung != best.rung and residuals[s.rung].size == reference.size:
-            picks = [_block_indices(reference.size, block, rng) for _ in range(plan.settings.bootstrap)]
             differences = [_rms(residuals[s.rung][i]) - _rms(reference[i]) for i in picks]
-            s = RungScore(**dict(s.to_dict(), heldout_se_mag=float(np.std(differences, ddof=1))))
+            s = replace(s, heldout_se_mag=float(np.std(differences, ddof=1)))
         elif s.rung == best.rung:
-            s = RungScore(**dict(s.to_dict(), heldout_se_mag=0.0))
+            s = replace(s, heldout_se_mag=0.0)
+        margin = max(settings.margin_floor_mag, s.heldout_se_mag if math.isfinite(s.heldout_se_mag) else 0.0)
+        if not chosen and s.ok and s.heldout_rms_mag - best.heldout_rms_mag <= margin:
+            chosen = s.rung
         with_se.append(s)
-    result = LadderResult(
-        observed.pass_id, plan.settings.name, tuple(with_se), "", best.rung, plan.settings.margin_floor_mag, train_end
-    )
-    chosen = next(s.rung for s in with_se if s.ok and s.heldout_rms_mag - best.heldout_rms_mag <= result.margin_mag(s))
-    return LadderResult(**dict(vars(result), chosen=chosen))
+    return tuple(with_se), chosen, best.rung
 
 
 def run_ladder(
@@ -446,11 +485,20 @@ def run_ladder(
     """
     plan = plan or LadderPlan()
     observed = [archive.get(p) for p in pass_ids]
-    groups = [(config, [o.pass_id]) for o in observed for _, config in plan.configs(o)]
-    if not groups:
+    planned = [(o, config) for o in observed for _, config in plan.configs(o)]
+    if not planned:
         raise ValueError("the ladder has no rungs; give [ladder] rungs (or [objects.NORAD] rungs) in its configuration")
     failures: dict[str, dict[str, str]] = {o.pass_id: {} for o in observed}
-    if in_process:
+    groups = []
+    for o, config in planned:
+        if getattr(o, "tle", None) is None and getattr(o, "omm", None) is None:
+            # The geometry needs the orbit: a pass without elements cannot be fitted at all.
+            failures[o.pass_id][config.name] = "the pass carries no TLE or OMM record, so its geometry is unknown"
+        else:
+            groups.append((config, [o.pass_id]))
+    if not groups:
+        pass
+    elif in_process:
         for config, (pass_id,) in groups:
             if not restart and config.name in archive.result_names(pass_id, "fits"):
                 continue

@@ -12,6 +12,7 @@ __all__ = ["register", "run"]
 
 EXAMPLE = """\
 examples:
+  rsodb ladder --archive archive --config configs/real_passes.toml --ingest ../shared/data/observations
   rsodb ladder --archive archive --config configs/real_passes.toml
   rsodb ladder --archive archive --config configs/real_passes.toml --object 22076 --report ladder.html
   rsodb ladder --archive archive --config configs/real_passes.toml --scheduler tcp://head-node:8786
@@ -22,6 +23,8 @@ train_fraction) and stored as the fit <ladder name>.<shape>-<attitude>; its held
 measured on the rest. The simplest rung within the margin of the best held-out RMS is chosen
 (docs/real_passes.md). Rungs already stored are not refitted (--restart refits them), so a
 stopped ladder continues where it stopped. Without --passes or --object every pass is laddered.
+--ingest first stores the given files (or directories) and finds the period of every pass
+that has none, so one command goes from files to chosen models.
 """
 
 
@@ -36,6 +39,7 @@ def register(subparsers) -> None:
     )
     add_archive_option(parser)
     parser.add_argument("--config", required=True, metavar="LADDER.toml", help="ladder configuration")
+    parser.add_argument("--ingest", nargs="+", metavar="PATH", help="first ingest these files or directories")
     parser.add_argument("--object", type=int, metavar="NORAD", help="only the passes of this object")
     parser.add_argument("--passes", nargs="+", metavar="PASS", help="only these passes (ids or prefixes)")
     parser.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler address (default: a LocalCluster)")
@@ -49,9 +53,23 @@ def register(subparsers) -> None:
     parser.set_defaults(func=run)
 
 
+def _ingest(archive, paths, progress: bool) -> None:
+    """Store the files and find the period of the objects whose passes have none."""
+    report = archive.ingest(paths, progress=progress)
+    if report.failed:
+        raise ValueError(f"{len(report.failed)} file(s) failed to ingest; run 'rsodb ingest' on them for the reasons")
+    missing = sorted(
+        {row.norad for row in archive.catalog() if "default" not in archive.result_names(row.pass_id, "periods")}
+    )
+    for norad in missing:
+        rsodb.campaign.survey_periods(archive, norad, progress=progress)
+
+
 def run(args: argparse.Namespace) -> int:
     try:
-        archive = open_archive(args)
+        archive = open_archive(args, create=bool(args.ingest))
+        if args.ingest:
+            _ingest(archive, args.ingest, progress=not (args.quiet or args.json))
         plan = rsodb.campaign.LadderPlan.from_toml(args.config)
         if args.workers is not None and args.workers < 1:
             raise ValueError(f"--workers {args.workers} must be at least 1")
