@@ -17,6 +17,7 @@ from rsodb.campaign.ladder import (
     RungScore,
     choose_rung,
     run_ladder,
+    score_ladder,
 )
 from rsodb.cli import main
 from rsodb.fit.config import FitConfig
@@ -164,6 +165,10 @@ def test_the_ladder_chooses_the_true_shape_on_held_out_samples(injected, tmp_pat
     # The precessing rung has more parameters: chosen only if it beat the truth by more than the margin.
     assert ladder.chosen == "ellipsoid-inertial"
     assert "lad.ellipsoid-inertial" in injected.result_names(pass_id, "fits")
+
+    # Replayed at the posterior median (predict_fit), the true model predicts as well.
+    replayed = score_ladder(injected, pass_id, plan, median=True).score("ellipsoid-inertial")
+    assert replayed.median_heldout_rms_mag < 0.1
 
     page = build_ladder_report(injected, [ladder]).write(tmp_path / "ladder.html").read_text()
     assert page.count("<img") == 2 and "held-out RMS (mag)" in page

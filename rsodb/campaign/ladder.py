@@ -25,6 +25,7 @@ import numpy as np
 from rsodb.campaign.fit_campaign import run_campaigns
 from rsodb.fit.config import PERIODS_PRIOR, FitConfig
 from rsodb.fit.model import ATTITUDES
+from rsodb.fit.prediction import predict_fit
 from rsodb.fit.result import FitResult
 from rsodb.fit.runner import fit_pass, load_periods
 from rsodb.fit.selection import usable_samples
@@ -39,6 +40,7 @@ __all__ = [
     "run_ladder",
     "score_ladder",
     "choose_rung",
+    "median_rms",
 ]
 
 # Detail of a shape and an attitude family, for ordering rungs of equal parameter count.
@@ -234,6 +236,8 @@ class RungScore:
     verdict: str = ""
     light_curve_period_s: float = math.nan
     elapsed_s: float = math.nan
+    median_train_rms_mag: float = math.nan
+    median_heldout_rms_mag: float = math.nan
 
     @property
     def ok(self) -> bool:
@@ -282,17 +286,18 @@ class LadderResult:
         rows = [
             f"ladder {self.name!r} of {self.pass_id}: trained up to {self.train_end_utc} UTC, held out after",
             f"{'rung':<24} {'npar':>4} {'train':>7} {'held-out':>8} {'+-se':>6} {'n_held':>6} "
-            f"{'P_lc (s)':>9} {'conv':>5}  status",
+            f"{'P_lc (s)':>9} {'conv':>5} {'median: train':>13} {'held-out':>8}  status",
         ]
         for s in self.scores:
             mark = " <- chosen" if s.rung == self.chosen else (" (best)" if s.rung == self.best else "")
             rows.append(
                 f"{s.rung:<24} {s.n_parameters:>4} {s.train_rms_mag:7.3f} {s.heldout_rms_mag:8.3f} "
                 f"{s.heldout_se_mag:6.3f} {s.n_heldout:>6} {s.light_curve_period_s:9.4f} "
-                f"{'yes' if s.converged else 'no':>5}  {s.status}{mark}"
+                f"{'yes' if s.converged else 'no':>5} {s.median_train_rms_mag:13.3f} {s.median_heldout_rms_mag:8.3f}  "
+                f"{s.status}{mark}"
             )
         rows.append(
-            f"RMS in mag; chosen = simplest rung with held-out RMS within max({self.margin_floor_mag:.3f} mag, "
+            f"RMS in mag of the best-fit sample (median: of the posterior median, when replayed); chosen = simplest rung with held-out RMS within max({self.margin_floor_mag:.3f} mag, "
             "its bootstrap standard error) of the best"
         )
         return "\n".join(rows)
@@ -309,11 +314,20 @@ class LadderResult:
         }
 
 
-def _heldout_mask(result: FitResult, observed) -> np.ndarray:
-    """(n,) bool over the stored samples: usable (unsaturated) samples after the training window."""
+def _heldout_mask(time_utc: np.ndarray, in_window: np.ndarray, observed) -> np.ndarray:
+    """(n,) bool over a curve's samples: usable (unsaturated) samples after the training window."""
     usable_times = observed.time_utc[usable_samples(observed)]
-    after = result.time_utc > result.window_utc[1]
-    return after & np.isin(result.time_utc, usable_times)
+    after = time_utc > time_utc[in_window][-1]
+    return after & np.isin(time_utc, usable_times)
+
+
+def median_rms(archive, pass_id: str, fit_name: str, observed=None) -> tuple[float, float]:
+    """(training, held-out) residual RMS of a stored fit's posterior median (`predict_fit`), mag."""
+    observed = observed or archive.get(pass_id)
+    curve = predict_fit(archive, observed.pass_id, fit_name, draws=1).samples
+    residuals = curve.mag_obs - curve.mag_model
+    heldout = _heldout_mask(curve.time_utc, curve.in_window, observed)
+    return _rms(residuals[curve.in_window]), _rms(residuals[heldout])
 
 
 def _block_indices(n: int, block: int, rng) -> np.ndarray:
@@ -328,7 +342,7 @@ def _rms(values: np.ndarray) -> float:
 
 
 def _score(rung: Rung, fit_name: str, result: FitResult, observed) -> tuple[RungScore, np.ndarray]:
-    heldout = _heldout_mask(result, observed)
+    heldout = _heldout_mask(result.time_utc, result.in_window, observed)
     residuals = result.residuals_mag
     conventions = dict(result.spin_periods).get("conventions", {})
     score = RungScore(
@@ -358,7 +372,9 @@ def _complexity(score: RungScore, order: int) -> tuple:
     return (count, SHAPE_RANK.get(score.shape, MESH_RANK), ATTITUDE_RANK[score.attitude], order)
 
 
-def score_ladder(archive, pass_id: str, plan: LadderPlan, failures: Mapping[str, str] | None = None) -> LadderResult:
+def score_ladder(
+    archive, pass_id: str, plan: LadderPlan, failures: Mapping[str, str] | None = None, *, median: bool = False
+) -> LadderResult:
     """Score the stored rungs of one pass and choose.
 
     The margin of a rung is ``max(margin_floor_mag, se)``, where ``se`` is the moving-block
@@ -373,6 +389,9 @@ def score_ladder(archive, pass_id: str, plan: LadderPlan, failures: Mapping[str,
     plan : LadderPlan
     failures : mapping of fit name to error text, optional
         Fits of this run that failed (shown as the rung's status).
+    median : bool
+        Also replay every scored rung at its posterior median (`predict_fit`) for the
+        ``median_*_rms_mag`` columns (the choice stays on the stored best-fit curves).
     """
     observed = archive.get(pass_id)
     failures = dict(failures or {})
@@ -392,6 +411,9 @@ def score_ladder(archive, pass_id: str, plan: LadderPlan, failures: Mapping[str,
             continue
         result = archive.load_result(observed.pass_id, "fits", config.name, FitResult.from_hdf5)
         score, heldout = _score(rung, config.name, result, observed)
+        if median and score.ok:
+            train, held = median_rms(archive, observed.pass_id, config.name, observed)
+            score = replace(score, median_train_rms_mag=train, median_heldout_rms_mag=held)
         train_end = str(result.window_utc[1])[:23]
         scores.append((score, order))
         residuals[rung.name] = heldout
@@ -460,6 +482,7 @@ def run_ladder(
     in_process: bool = False,
     restart: bool = False,
     progress: bool = True,
+    median: bool = False,
 ) -> list[LadderResult]:
     """Fit every rung of every pass (one Dask campaign), store the fits, score and choose.
 
@@ -478,6 +501,8 @@ def run_ladder(
     restart : bool
         Refit rungs that already have a stored fit.
     progress : bool
+    median : bool
+        Also replay each rung at its posterior median (`score_ladder`).
 
     Returns
     -------
@@ -513,4 +538,4 @@ def run_ladder(
         for (config, _), outcome in zip(groups, outcomes):
             for pass_id, error in outcome.failed:
                 failures[pass_id][config.name] = error
-    return [score_ladder(archive, o.pass_id, plan, failures[o.pass_id]) for o in observed]
+    return [score_ladder(archive, o.pass_id, plan, failures[o.pass_id], median=median) for o in observed]

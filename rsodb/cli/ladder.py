@@ -47,6 +47,9 @@ def register(subparsers) -> None:
     parser.add_argument("--in-process", action="store_true", help="fit here, one rung after another, without Dask")
     parser.add_argument("--restart", action="store_true", help="refit rungs that already have a stored fit")
     parser.add_argument("--score-only", action="store_true", help="fit nothing; score the stored rungs")
+    parser.add_argument(
+        "--median", action="store_true", help="also replay each rung at its posterior median (RMS columns)"
+    )
     parser.add_argument("--report", metavar="FILE.html", help="write the ladder report here when done")
     parser.add_argument("--json", action="store_true", help="print the ladders as JSON")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -80,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
         if not pass_ids:
             raise LookupError(f"the archive has no passes{f' of NORAD {args.object}' if args.object else ''}")
         if args.score_only:
-            ladders = [rsodb.campaign.score_ladder(archive, p, plan) for p in pass_ids]
+            ladders = [rsodb.campaign.score_ladder(archive, p, plan, median=args.median) for p in pass_ids]
         else:
             ladders = rsodb.campaign.run_ladder(
                 archive,
@@ -91,6 +94,7 @@ def run(args: argparse.Namespace) -> int:
                 in_process=args.in_process,
                 restart=args.restart,
                 progress=not (args.quiet or args.json),
+                median=args.median,
             )
         report_path = None
         if args.report:
