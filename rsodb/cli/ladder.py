@@ -50,6 +50,11 @@ def register(subparsers) -> None:
     parser.add_argument(
         "--median", action="store_true", help="also replay each rung at its posterior median (RMS columns)"
     )
+    parser.add_argument(
+        "--posterior",
+        action="store_true",
+        help="also print the chosen rung's posterior table (every period convention)",
+    )
     parser.add_argument("--report", metavar="FILE.html", help="write the ladder report here when done")
     parser.add_argument("--json", action="store_true", help="print the ladders as JSON")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -109,7 +114,12 @@ def run(args: argparse.Namespace) -> int:
             )
         )
     else:
-        print("\n\n".join(ladder.table() for ladder in ladders))
+        for ladder in ladders:
+            print(ladder.table() + "\n")
+            if args.posterior and ladder.chosen:
+                fit_name = ladder.score(ladder.chosen).fit_name
+                result = archive.load_result(ladder.pass_id, "fits", fit_name, rsodb.FitResult.from_hdf5)
+                print(f"posterior of the chosen rung ({fit_name}):\n{result.table()}\n")
         if report_path:
             print(f"wrote {report_path}")
     return 0
