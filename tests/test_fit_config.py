@@ -191,3 +191,42 @@ def test_fit_command_fits_a_stored_pass_and_prints_json(tmp_path, capsys):
     # Without a stored period the default prior cannot be built: a one-line error, status 2.
     assert main(["fit", pass_id, "--archive", str(archive.path), "--steps", "5"]) == 2
     assert "rsodb fit: error: spin_period_s takes its prior from the stored period" in capsys.readouterr().err
+
+
+def test_a_weak_stored_period_names_the_force_flag_and_the_flag_works():
+    """Every fix an error suggests is a real flag: a weak stored period says --force, and
+    `rsodb fit --force` sets force = true on the period prior."""
+    import argparse
+
+    from rsodb.cli import build_parser
+    from rsodb.cli.fit import config_from_args
+
+    class WeakPeriods(FakePeriods):
+        has_period = False
+        verdict = "too short"
+        reason = "2.1 cycles over the pass"
+        label = "fake"
+
+        def prior_interval_s(self, width_frac=0.01, frame="sidereal", force=False):
+            assert force, "the prior of a weak period is asked for only with force"
+            return super().prior_interval_s(width_frac, frame)
+
+    with pytest.raises(ValueError, match=r"verdict 'too short' .* use that period anyway with --force"):
+        FitConfig().parameter_space({}, WeakPeriods())
+    parser = build_parser()
+    args = parser.parse_args(["fit", "22076", "--archive", "a", "--force"])
+    assert isinstance(args, argparse.Namespace) and args.force
+    space = config_from_args(args).parameter_space({}, WeakPeriods())
+    low, high = space.bounds[space.names.index("spin_period_s")]
+    assert (low, high) == pytest.approx((9.86 * 0.99, 9.86 * 1.01))
+
+
+def test_force_with_a_fit_that_gives_its_own_spin_period_prior_says_so(tmp_path):
+    from rsodb.cli import build_parser
+    from rsodb.cli.fit import config_from_args
+
+    own = tmp_path / "own.toml"
+    own.write_text('[parameters]\nspin_period_s = { kind = "uniform", low = 9.0, high = 11.0 }\n')
+    args = build_parser().parse_args(["fit", "22076", "--archive", "a", "--force", "--config", str(own)])
+    with pytest.raises(ValueError, match="--force lets a weak stored period set the spin-period prior, but this fit"):
+        config_from_args(args)

@@ -32,8 +32,9 @@ examples:
 MODEL is topex, cosmos2502 (code-built look-alike), cosmos2502-paper (the paper's mesh from
 ../shared/data/models) or a mesh file (OBJ, PLY, glTF; give --materials for its JSON).
 The attitude (--attitude, default the seed paper's precessing spin) takes every parameter of its
-family; phases are at the reference epoch, the pass's (or span's) mid-time, as in a fit, so a
-fitted state renders as fitted. --n-sub integrates each exposure over that many sub-samples
+family; phases are at the reference epoch, the pass's (or span's) mid-time as in a fit of the
+whole pass, or --epoch UTC (a fit of a window: its 'phases at' time), so a fitted state renders
+as fitted. --n-sub integrates each exposure over that many sub-samples
 (default: enough for 2 deg of rotation each). With --pass the model magnitude is reduced to
 1000 km and shifted by the median offset to the observed magnitudes (shape, not albedo, is
 compared). --from-fit PASS[:NAME] replays a stored fit with its own model: the posterior median
@@ -103,6 +104,12 @@ def register(subparsers) -> None:
     )
     for name, (option, default, text) in PARAMETER_OPTIONS.items():
         parser.add_argument(option, dest=name, type=float, default=default, help=f"{text} (default {default:g})")
+    parser.add_argument(
+        "--epoch",
+        metavar="UTC",
+        help="reference epoch of the phases, ISO UTC (default: the pass's or span's mid-time; a fit's is its "
+        "window's mid-time, printed as 'phases at')",
+    )
     parser.add_argument("--spin-axis", choices=("x", "y", "z"), default="z", help="body axis that spins")
     parser.add_argument("--panel-pitch-deg", type=float, default=None, help="TOPEX solar-array pitch")
     parser.add_argument(
@@ -137,10 +144,23 @@ def _attitude_summary(args, epoch_utc) -> dict:
     return summary
 
 
-def _mid_epoch(time_utc):
-    """(seconds after the first time, UTC) of the midpoint of `time_utc`: a fit's reference epoch."""
-    half = (time_utc[-1] - time_utc[0]) // 2
-    return float(half / np.timedelta64(1, "s")), time_utc[0] + half
+def _utc(text: str, option: str) -> np.datetime64:
+    try:
+        return np.datetime64(text.rstrip("Z"), "ns")
+    except ValueError:
+        raise ValueError(f"{option} {text!r} is not an ISO UTC time; give e.g. 2024-07-30T21:22:40") from None
+
+
+def _epoch(args, first_utc, last_utc):
+    """(seconds after `first_utc`, UTC) of the phases' reference epoch: --epoch, else the midpoint
+    of the frames (a fit's reference epoch when it fits the whole pass)."""
+    if args.epoch:
+        epoch_utc = _utc(args.epoch, "--epoch")
+    else:
+        epoch_utc = (
+            np.datetime64(first_utc, "ns") + (np.datetime64(last_utc, "ns") - np.datetime64(first_utc, "ns")) // 2
+        )
+    return float((epoch_utc - np.datetime64(first_utc, "ns")) / np.timedelta64(1, "s")), epoch_utc
 
 
 def run(args) -> int:
@@ -157,7 +177,7 @@ def run(args) -> int:
         if not args.archive:
             raise ValueError("--pass needs --archive DIR (or render a TLE span with --tle)")
         stored = open_archive(args).get(args.pass_id)
-        epoch_s, epoch_utc = _mid_epoch(stored.time_utc)
+        epoch_s, epoch_utc = _epoch(args, stored.time_utc[0], stored.time_utc[-1])
         attitude = _attitude(args, epoch_s)
         model, body = rsodb.rendering.render_pass(stored, scene, attitude, args.method, args.accuracy_mag, args.n_sub)
     except (ValueError, LookupError, FileNotFoundError) as error:
@@ -204,8 +224,10 @@ def run(args) -> int:
 
 def _run_fit(args) -> int:
     """``--from-fit``: replay a stored fit; raises ValueError/LookupError on bad options."""
-    if args.model or args.materials:
-        raise ValueError("--from-fit renders the fit's own model; leave out --model and --materials")
+    if args.model or args.materials or args.epoch:
+        raise ValueError(
+            "--from-fit renders the fit's own model at its own epoch; leave out --model, --materials, --epoch"
+        )
     if not args.archive:
         raise ValueError("--from-fit needs --archive DIR")
     pass_id, _, name = args.from_fit.partition(":")
@@ -264,14 +286,11 @@ def _run_span(args, scene):
     """``--tle``: render a span; raises ValueError on bad options (reported by :func:`run`)."""
     if args.start is None or args.duration is None:
         raise ValueError("--tle needs --start UTC and --duration S")
-    try:
-        start = np.datetime64(args.start.rstrip("Z"), "us")
-    except ValueError:
-        raise ValueError(f"--start {args.start!r} is not an ISO UTC time; give e.g. 2024-07-30T21:22:40") from None
+    start = _utc(args.start, "--start").astype("datetime64[us]")
     site = ingest.Site.from_text(args.site)
     satellite = raycast.Satellite.from_catalogue(args.tle, args.norad, start)
-    epoch_s = args.duration / 2.0
-    epoch_utc = np.datetime64(start, "ns") + np.timedelta64(int(round(epoch_s * 1e9)), "ns")
+    end = np.datetime64(start, "ns") + np.timedelta64(int(round(args.duration * 1e9)), "ns")
+    epoch_s, epoch_utc = _epoch(args, start, end)
     model, body, geometry = rsodb.rendering.render_span(
         satellite,
         site,
