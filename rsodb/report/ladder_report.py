@@ -59,7 +59,8 @@ def scores_table(ladder) -> Table:
 
 
 def scores_figure(ladder):
-    """Training and held-out RMS of every rung as paired bars; the margin above the best as a band."""
+    """Training and held-out RMS of every rung as paired bars (held-out with the bootstrap standard
+    error of its difference from the best); the margin floor above the best as a band."""
     # matplotlib loads in about a second; only drawing needs it.
     from matplotlib.figure import Figure
 
@@ -69,7 +70,10 @@ def scores_figure(ladder):
     x = np.arange(len(ladder.scores))
     axis.bar(x - 0.2, [s.train_rms_mag for s in ladder.scores], 0.4, color="0.7", label="training window")
     colours = ["C3" if s.rung == ladder.chosen else "C0" for s in ladder.scores]
-    axis.bar(x + 0.2, [s.heldout_rms_mag for s in ladder.scores], 0.4, color=colours, label="held out")
+    errors = [s.heldout_se_mag if math.isfinite(s.heldout_se_mag) else 0.0 for s in ladder.scores]
+    axis.bar(
+        x + 0.2, [s.heldout_rms_mag for s in ladder.scores], 0.4, yerr=errors, color=colours, label="held out (+- SE)"
+    )
     if scored and ladder.best:
         best = ladder.score(ladder.best).heldout_rms_mag
         axis.axhspan(best, best + ladder.margin_floor_mag, color="C2", alpha=0.25, label="best + margin floor")
