@@ -24,7 +24,7 @@ from rsodb.fit.config import FitConfig
 from rsodb.fit.coverage import inject, window
 from rsodb.fit.runner import FitProblem
 from rsodb.report.ladder_report import build_ladder_report
-from tests.conftest import TOPEX_PHV
+from tests.conftest import PROJECT_ROOT, TOPEX_PHV
 
 PLAN = {
     "ladder": {
@@ -118,13 +118,13 @@ def test_bad_configurations_say_what_to_fix(record, message):
     assert message in str(error.value)
 
 
-def test_the_real_passes_configuration_reads(shared_data):
-    from tests.conftest import PROJECT_ROOT
-
+def test_the_real_passes_configurations_read():
     plan = LadderPlan.from_toml(PROJECT_ROOT / "configs" / "real_passes.toml")
     names = [r.name for r in plan.rungs_for(22076)]
     assert "topex-precessing" in names and names[0] == "ellipsoid-inertial"
     assert plan.base_for(44517).parameters["spin_period_s"]["force"] is True
+    whole = FitConfig.from_toml(PROJECT_ROOT / "configs" / "topex_whole_pass.toml")
+    assert (whole.model.shape, whole.data.duration_s) == ("topex", 0.0)
 
 
 @pytest.fixture(scope="module")

@@ -93,7 +93,9 @@ class Rung:
         parameters.update(self.parameters)
         record = base.to_dict()
         record.update(name=f"{ladder}.{self.name}", parameters=parameters)
-        record["model"] = dict(record["model"], shape=self.shape, attitude=self.attitude, mesh="", materials="")
+        record["model"] = dict(
+            record["model"], shape=self.shape, attitude=self.attitude, mesh="", materials="", articulations=[]
+        )
         record["data"] = dict(record["data"], start_s=0.0, duration_s=float(duration_s))
         # emcee's stretch move needs more than twice as many walkers as free parameters (+ jitter).
         walkers = 2 * (len(ATTITUDES[self.attitude].parameters) + 1) + 2
