@@ -27,6 +27,7 @@ COMMAND_MODULES = [
     "report",
     "fit",
     "campaign",
+    "ladder",
     "pipeline",
 ]
 

@@ -1,0 +1,543 @@
+"""The model ladder: fit one pass with shapes and attitude families of growing detail, score each
+rung on the part of the pass its fit did not see, and choose the simplest rung within a stated
+margin of the best.
+
+Each rung is an ordinary fit (`rsodb.fit`) stored as ``<ladder>.<shape>-<attitude>`` and fitted
+on the first ``train_fraction`` of the pass (``[data] start_s``/``duration_s``); every fit
+already keeps its best-fit model over the whole pass, so the held-out residuals cost nothing
+more. The fits run as one Dask campaign (`rsodb.campaign.fit_campaign.run_campaigns`), so a
+ladder of many passes runs on a scheduler address too. docs/real_passes.md explains the choice
+and its margin.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+import math
+from pathlib import Path
+import tomllib
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+
+from rsodb.campaign.fit_campaign import run_campaigns
+from rsodb.fit.config import PERIODS_PRIOR, FitConfig
+from rsodb.fit.model import ATTITUDES
+from rsodb.fit.prediction import predict_fit
+from rsodb.fit.result import FitResult
+from rsodb.fit.runner import fit_pass, load_periods
+from rsodb.fit.selection import usable_samples
+from rsodb.fit.shapes import SHAPES
+
+__all__ = [
+    "Rung",
+    "RungScore",
+    "LadderSettings",
+    "LadderPlan",
+    "LadderResult",
+    "run_ladder",
+    "score_ladder",
+    "choose_rung",
+    "median_rms",
+]
+
+# Detail of a shape and an attitude family, for ordering rungs of equal parameter count.
+SHAPE_RANK = MappingProxyType({"ellipsoid": 0, "lopsided": 0, "box": 1})
+MESH_RANK = 3
+ATTITUDE_RANK = MappingProxyType({"inertial": 0, "precessing": 1, "torque_free": 2})
+# Shapes that look the same after half a turn about their spin axis: their light curve repeats
+# twice per spin, so their spin period is twice the light curve's.
+HALF_TURN_SYMMETRIC = frozenset({"ellipsoid", "box"})
+# Fewest bootstrap blocks in the held-out part (blocks are shortened to keep this many).
+MIN_BLOCKS = 10
+
+
+@dataclass(frozen=True)
+class Rung:
+    """One model of the ladder: a shape (a `rsodb.fit.shapes.SHAPES` name) and an attitude family.
+
+    ``parameters`` overlay the base configuration's (e.g. a wider spin-period prior).
+    """
+
+    shape: str
+    attitude: str
+    parameters: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self):
+        if self.shape not in SHAPES:
+            raise ValueError(f"ladder rung shape={self.shape!r} is not one of {', '.join(SHAPES)}")
+        if self.attitude not in ATTITUDES:
+            raise ValueError(f"ladder rung attitude={self.attitude!r} is not one of {', '.join(ATTITUDES)}")
+        object.__setattr__(self, "parameters", MappingProxyType(dict(self.parameters)))
+
+    @classmethod
+    def from_dict(cls, record: Mapping) -> Rung:
+        unknown = sorted(set(record) - {"shape", "attitude", "parameters"})
+        if unknown or "shape" not in record or "attitude" not in record:
+            raise ValueError(f"a ladder rung needs shape and attitude (optional parameters); got {dict(record)!r}")
+        return cls(record["shape"], record["attitude"], dict(record.get("parameters", {})))
+
+    @property
+    def name(self) -> str:
+        return f"{self.shape}-{self.attitude}"
+
+    def config(self, base: FitConfig, ladder: str, duration_s: float) -> FitConfig:
+        """The rung's fit: `base` with this shape and attitude, fitted on ``[0, duration_s]``."""
+        parameters = dict(base.parameters)
+        period = parameters.get("spin_period_s", dict(PERIODS_PRIOR))
+        if isinstance(period, Mapping) and "from" in period and self.shape in HALF_TURN_SYMMETRIC:
+            period = dict(period, multiple=2.0 * float(period.get("multiple", 1.0)))
+        parameters["spin_period_s"] = period
+        parameters.update(self.parameters)
+        record = base.to_dict()
+        record.update(name=f"{ladder}.{self.name}", parameters=parameters)
+        record["model"] = dict(
+            record["model"], shape=self.shape, attitude=self.attitude, mesh="", materials="", articulations=[]
+        )
+        record["data"] = dict(record["data"], start_s=0.0, duration_s=float(duration_s))
+        # emcee's stretch move needs more than twice as many walkers as free parameters (+ jitter).
+        walkers = 2 * (len(ATTITUDES[self.attitude].parameters) + 1) + 2
+        record["sampler"] = dict(record["sampler"], n_walkers=max(base.sampler.n_walkers, walkers))
+        return FitConfig.from_dict(record)
+
+
+@dataclass(frozen=True)
+class LadderSettings:
+    """How a ladder is fitted and chosen.
+
+    Attributes
+    ----------
+    name : str
+        Prefix of the stored fits (``<name>.<shape>-<attitude>``).
+    rungs : tuple of Rung
+    train_fraction : float
+        The fits see the first this fraction of the pass; the rest is held out.
+    margin_floor_mag : float
+        The smallest margin (mag): held-out RMS differences below it are not told apart.
+    bootstrap : int
+        Block-bootstrap resamples behind the standard error of each rung's held-out RMS
+        difference from the best.
+    seed : int
+    """
+
+    name: str = "ladder"
+    rungs: tuple = ()
+    train_fraction: float = 0.7
+    margin_floor_mag: float = 0.02
+    bootstrap: int = 500
+    seed: int = 0
+
+    def __post_init__(self):
+        rungs = tuple(r if isinstance(r, Rung) else Rung.from_dict(r) for r in self.rungs)
+        names = [r.name for r in rungs]
+        if len(set(names)) != len(names):
+            raise ValueError(f"ladder rungs {names} repeat a shape-attitude pair; give each once")
+        object.__setattr__(self, "rungs", rungs)
+        if not (0.2 <= self.train_fraction <= 0.95):
+            raise ValueError(f"[ladder] train_fraction={self.train_fraction!r} must be within 0.2..0.95")
+        if not (0 <= self.margin_floor_mag < 1):
+            raise ValueError(f"[ladder] margin_floor_mag={self.margin_floor_mag!r} must be within 0..1 mag")
+        if not (isinstance(self.bootstrap, int) and self.bootstrap >= 50):
+            raise ValueError(f"[ladder] bootstrap={self.bootstrap!r} must be a whole number >= 50")
+
+
+@dataclass(frozen=True)
+class LadderPlan:
+    """A ladder campaign: settings, the base fit and per-object additions.
+
+    ``objects`` maps a NORAD number to ``{"rungs": [...], "parameters": {...}}``: rungs added
+    to the ladder of that object's passes (e.g. its own model) and parameters overlaid on all
+    its rungs (e.g. a forced period prior).
+    """
+
+    settings: LadderSettings = field(default_factory=LadderSettings)
+    base: FitConfig = field(default_factory=FitConfig)
+    objects: Mapping[int, Mapping] = field(default_factory=dict)
+
+    @classmethod
+    def from_dict(cls, record: Mapping) -> LadderPlan:
+        unknown = sorted(set(record) - {"ladder", "fit", "objects"})
+        if unknown:
+            raise ValueError(f"ladder configuration has unknown sections {unknown}; allowed: ladder, fit, objects")
+        ladder = dict(record.get("ladder", {}))
+        allowed = LadderSettings.__dataclass_fields__
+        if sorted(set(ladder) - set(allowed)):
+            raise ValueError(
+                f"[ladder] has unknown keys {sorted(set(ladder) - set(allowed))}; allowed: {', '.join(allowed)}"
+            )
+        objects = {}
+        for norad, extra in dict(record.get("objects", {})).items():
+            if not str(norad).isdigit() or not isinstance(extra, Mapping) or set(extra) - {"rungs", "parameters"}:
+                raise ValueError(
+                    f"[objects.{norad}] must be a NORAD number with rungs and/or parameters; got {extra!r}"
+                )
+            for rung in extra.get("rungs", ()):
+                Rung.from_dict(rung)
+            objects[int(norad)] = {
+                "rungs": list(extra.get("rungs", ())),
+                "parameters": dict(extra.get("parameters", {})),
+            }
+        return cls(LadderSettings(**ladder), FitConfig.from_dict(record.get("fit", {})), objects)
+
+    @classmethod
+    def from_toml(cls, path: str | Path) -> LadderPlan:
+        path = Path(path)
+        try:
+            with open(path, "rb") as handle:
+                record = tomllib.load(handle)
+        except FileNotFoundError:
+            raise FileNotFoundError(
+                f"ladder configuration {path} does not exist; give the path of a .toml file"
+            ) from None
+        except tomllib.TOMLDecodeError as error:
+            raise ValueError(f"{path}: not valid TOML ({error})") from None
+        try:
+            return cls.from_dict(record)
+        except (TypeError, ValueError) as error:
+            raise ValueError(f"{path}: {error}") from None
+
+    def rungs_for(self, norad: int) -> tuple[Rung, ...]:
+        """The ladder of one object: the common rungs, then its own."""
+        return self.settings.rungs + tuple(Rung.from_dict(r) for r in self.objects.get(norad, {}).get("rungs", ()))
+
+    def base_for(self, norad: int) -> FitConfig:
+        """The base fit of one object (its parameters overlaid)."""
+        extra = self.objects.get(norad, {}).get("parameters", {})
+        return self.base.replace(parameters=dict(self.base.parameters, **extra)) if extra else self.base
+
+    def configs(self, observed) -> list[tuple[Rung, FitConfig]]:
+        """(rung, fit configuration) of every rung of a stored pass."""
+        usable = usable_samples(observed)
+        t_s = observed.t_s[usable]
+        if t_s.size < 20:
+            raise ValueError(f"pass {observed.pass_id} has {t_s.size} usable samples; a ladder needs at least 20")
+        duration_s = float(t_s[0] + self.settings.train_fraction * (t_s[-1] - t_s[0]))
+        base = self.base_for(observed.norad)
+        return [(rung, rung.config(base, self.settings.name, duration_s)) for rung in self.rungs_for(observed.norad)]
+
+
+@dataclass(frozen=True)
+class RungScore:
+    """One rung's fit and scores (NaN where the fit is missing or failed; `status` says why)."""
+
+    rung: str
+    shape: str
+    attitude: str
+    fit_name: str
+    status: str = "ok"
+    n_parameters: int = 0
+    train_rms_mag: float = math.nan
+    heldout_rms_mag: float = math.nan
+    heldout_se_mag: float = math.nan
+    n_train: int = 0
+    n_heldout: int = 0
+    reduced_chi2: float = math.nan
+    converged: bool = False
+    verdict: str = ""
+    light_curve_period_s: float = math.nan
+    elapsed_s: float = math.nan
+    median_train_rms_mag: float = math.nan
+    median_heldout_rms_mag: float = math.nan
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok" and math.isfinite(self.heldout_rms_mag)
+
+    def to_dict(self) -> dict:
+        return {k: getattr(self, k) for k in self.__dataclass_fields__}
+
+
+@dataclass(frozen=True)
+class LadderResult:
+    """The ladder of one pass: every rung's scores and the chosen rung.
+
+    Attributes
+    ----------
+    pass_id, name : str
+    scores : tuple of RungScore
+        Simplest first (fewest free parameters, then the less detailed shape and attitude).
+    chosen : str
+        The simplest rung whose held-out RMS is within the margin of the best ("" when none scored).
+    best : str
+        The rung with the lowest held-out RMS.
+    margin_floor_mag : float
+    train_end_utc : str
+        End of the training window; later samples are held out.
+    """
+
+    pass_id: str
+    name: str
+    scores: tuple
+    chosen: str
+    best: str
+    margin_floor_mag: float
+    train_end_utc: str = ""
+
+    def score(self, rung: str) -> RungScore:
+        return next(s for s in self.scores if s.rung == rung)
+
+    def margin_mag(self, score: RungScore) -> float:
+        """The margin a rung is allowed: the floor, or its bootstrap standard error if larger."""
+        se = score.heldout_se_mag if math.isfinite(score.heldout_se_mag) else 0.0
+        return max(self.margin_floor_mag, se)
+
+    def table(self) -> str:
+        """The ladder as a text table, simplest rung first."""
+        rows = [
+            f"ladder {self.name!r} of {self.pass_id}: trained up to {self.train_end_utc} UTC, held out after",
+            f"{'rung':<24} {'npar':>4} {'train':>7} {'held-out':>8} {'+-se':>6} {'n_held':>6} "
+            f"{'P_lc (s)':>9} {'conv':>5} {'median: train':>13} {'held-out':>8}  status",
+        ]
+        for s in self.scores:
+            mark = " <- chosen" if s.rung == self.chosen else (" (best)" if s.rung == self.best else "")
+            rows.append(
+                f"{s.rung:<24} {s.n_parameters:>4} {s.train_rms_mag:7.3f} {s.heldout_rms_mag:8.3f} "
+                f"{s.heldout_se_mag:6.3f} {s.n_heldout:>6} {s.light_curve_period_s:9.4f} "
+                f"{'yes' if s.converged else 'no':>5} {s.median_train_rms_mag:13.3f} {s.median_heldout_rms_mag:8.3f}  "
+                f"{s.status}{mark}"
+            )
+        rows.append(
+            f"RMS in mag of the best-fit sample (median: of the posterior median, when replayed); chosen = simplest rung with held-out RMS within max({self.margin_floor_mag:.3f} mag, "
+            "its bootstrap standard error) of the best"
+        )
+        return "\n".join(rows)
+
+    def to_dict(self) -> dict:
+        return {
+            "pass_id": self.pass_id,
+            "name": self.name,
+            "chosen": self.chosen,
+            "best": self.best,
+            "margin_floor_mag": self.margin_floor_mag,
+            "train_end_utc": self.train_end_utc,
+            "scores": [s.to_dict() for s in self.scores],
+        }
+
+
+def _heldout_mask(time_utc: np.ndarray, in_window: np.ndarray, observed) -> np.ndarray:
+    """(n,) bool over a curve's samples: usable (unsaturated) samples after the training window."""
+    usable_times = observed.time_utc[usable_samples(observed)]
+    after = time_utc > time_utc[in_window][-1]
+    return after & np.isin(time_utc, usable_times)
+
+
+def median_rms(archive, pass_id: str, fit_name: str, observed=None) -> tuple[float, float]:
+    """(training, held-out) residual RMS of a stored fit's posterior median (`predict_fit`), mag."""
+    observed = observed or archive.get(pass_id)
+    curve = predict_fit(archive, observed.pass_id, fit_name, draws=1).samples
+    residuals = curve.mag_obs - curve.mag_model
+    heldout = _heldout_mask(curve.time_utc, curve.in_window, observed)
+    return _rms(residuals[curve.in_window]), _rms(residuals[heldout])
+
+
+def _block_indices(n: int, block: int, rng) -> np.ndarray:
+    """Moving-block bootstrap: indices of ceil(n / block) random blocks of consecutive samples, cut to n."""
+    block = int(min(max(block, 1), n))
+    starts = rng.integers(0, n - block + 1, size=math.ceil(n / block))
+    return (starts[:, None] + np.arange(block)).ravel()[:n]
+
+
+def _rms(values: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(values**2))) if values.size else math.nan
+
+
+def _score(rung: Rung, fit_name: str, result: FitResult, observed) -> tuple[RungScore, np.ndarray]:
+    heldout = _heldout_mask(result.time_utc, result.in_window, observed)
+    residuals = result.residuals_mag
+    conventions = dict(result.spin_periods).get("conventions", {})
+    score = RungScore(
+        rung.name,
+        rung.shape,
+        rung.attitude,
+        fit_name,
+        "ok" if heldout.any() else "no held-out samples",
+        len(result.names),
+        _rms(residuals[result.in_window]),
+        _rms(residuals[heldout]),
+        math.nan,
+        result.n_window,
+        int(heldout.sum()),
+        result.reduced_chi2,
+        bool(result.converged),
+        result.verdict,
+        float(conventions.get("light_curve", {}).get("median", math.nan)),
+        float(result.elapsed_s),
+    )
+    return score, residuals[heldout]
+
+
+def _complexity(score: RungScore, order: int) -> tuple:
+    # A rung without a fit counts its attitude's parameters and the jitter.
+    count = score.n_parameters or len(ATTITUDES[score.attitude].parameters) + 1
+    return (count, SHAPE_RANK.get(score.shape, MESH_RANK), ATTITUDE_RANK[score.attitude], order)
+
+
+def score_ladder(
+    archive, pass_id: str, plan: LadderPlan, failures: Mapping[str, str] | None = None, *, median: bool = False
+) -> LadderResult:
+    """Score the stored rungs of one pass and choose.
+
+    The margin of a rung is ``max(margin_floor_mag, se)``, where ``se`` is the moving-block
+    bootstrap standard error (blocks one stored light-curve period long, the same resampled
+    samples for both) of the difference between its held-out RMS and the best rung's: a rung
+    is kept when ``rms - rms_best <= margin``. The simplest kept rung is chosen.
+
+    Parameters
+    ----------
+    archive : rsodb.archive.Archive
+    pass_id : str
+    plan : LadderPlan
+    failures : mapping of fit name to error text, optional
+        Fits of this run that failed (shown as the rung's status).
+    median : bool
+        Also replay every scored rung at its posterior median (`predict_fit`) for the
+        ``median_*_rms_mag`` columns (the choice stays on the stored best-fit curves).
+    """
+    observed = archive.get(pass_id)
+    failures = dict(failures or {})
+    stored = set(archive.result_names(observed.pass_id, "fits"))
+    scores, residuals, train_end = [], {}, ""
+    for order, (rung, config) in enumerate(plan.configs(observed)):
+        if config.name in failures:
+            scores.append(
+                (
+                    RungScore(rung.name, rung.shape, rung.attitude, config.name, f"failed: {failures[config.name]}"),
+                    order,
+                )
+            )
+            continue
+        if config.name not in stored:
+            scores.append((RungScore(rung.name, rung.shape, rung.attitude, config.name, "not fitted"), order))
+            continue
+        result = archive.load_result(observed.pass_id, "fits", config.name, FitResult.from_hdf5)
+        score, heldout = _score(rung, config.name, result, observed)
+        if median and score.ok:
+            train, held = median_rms(archive, observed.pass_id, config.name, observed)
+            score = replace(score, median_train_rms_mag=train, median_heldout_rms_mag=held)
+        train_end = str(result.window_utc[1])[:23]
+        scores.append((score, order))
+        residuals[rung.name] = heldout
+    scores = [s for s, _ in sorted(scores, key=lambda pair: _complexity(*pair))]
+    periods = load_periods(archive, observed.pass_id)
+    cadence = float(np.median(np.diff(observed.t_s))) if len(observed) > 1 else 1.0
+    block = (
+        round(periods.best_period_s / cadence) if periods is not None and math.isfinite(periods.best_period_s) else 1
+    )
+    scores, chosen, best = choose_rung(scores, residuals, block, plan.settings)
+    return LadderResult(
+        observed.pass_id, plan.settings.name, scores, chosen, best, plan.settings.margin_floor_mag, train_end
+    )
+
+
+def choose_rung(
+    scores: Sequence[RungScore], residuals: Mapping[str, np.ndarray], block: int, settings: LadderSettings
+) -> tuple[tuple[RungScore, ...], str, str]:
+    """Standard errors of the held-out differences and the choice.
+
+    Parameters
+    ----------
+    scores : sequence of RungScore
+        Simplest first.
+    residuals : mapping of rung name to (n,) float
+        Held-out residuals of every scored rung (the same samples for all).
+    block : int
+        Samples per bootstrap block (a light-curve period; shortened to keep `MIN_BLOCKS` blocks).
+    settings : LadderSettings
+        ``margin_floor_mag``, ``bootstrap``, ``seed``.
+
+    Returns
+    -------
+    (scores with ``heldout_se_mag``, chosen rung, best rung); both names are "" when no rung scored.
+    """
+    scored = [s for s in scores if s.ok]
+    if not scored:
+        return tuple(scores), "", ""
+    best = min(scored, key=lambda s: s.heldout_rms_mag)
+    reference = residuals[best.rung]
+    # At least MIN_BLOCKS blocks, or every resample is the same block and the error reads as zero.
+    block = max(1, min(int(block), reference.size // MIN_BLOCKS))
+    rng = np.random.default_rng(settings.seed)
+    picks = [_block_indices(reference.size, block, rng) for _ in range(settings.bootstrap)]
+    with_se, chosen = [], ""
+    for s in scores:
+        if s.ok and s.rung != best.rung and residuals[s.rung].size == reference.size:
+            differences = [_rms(residuals[s.rung][i]) - _rms(reference[i]) for i in picks]
+            s = replace(s, heldout_se_mag=float(np.std(differences, ddof=1)))
+        elif s.rung == best.rung:
+            s = replace(s, heldout_se_mag=0.0)
+        margin = max(settings.margin_floor_mag, s.heldout_se_mag if math.isfinite(s.heldout_se_mag) else 0.0)
+        if not chosen and s.ok and s.heldout_rms_mag - best.heldout_rms_mag <= margin:
+            chosen = s.rung
+        with_se.append(s)
+    return tuple(with_se), chosen, best.rung
+
+
+def run_ladder(
+    archive,
+    pass_ids: Sequence[str],
+    plan: LadderPlan | None = None,
+    *,
+    scheduler: str | None = None,
+    n_workers: int | None = None,
+    in_process: bool = False,
+    restart: bool = False,
+    progress: bool = True,
+    median: bool = False,
+) -> list[LadderResult]:
+    """Fit every rung of every pass (one Dask campaign), store the fits, score and choose.
+
+    Parameters
+    ----------
+    archive : rsodb.archive.Archive
+    pass_ids : sequence of str
+    plan : LadderPlan, optional
+        Default: `LadderPlan()` (which has no rungs: give them).
+    scheduler : str, optional
+        Dask scheduler address; default a LocalCluster (`run_campaigns`).
+    n_workers : int, optional
+        LocalCluster workers.
+    in_process : bool
+        Fit here, one rung after another, without Dask (tests, debugging).
+    restart : bool
+        Refit rungs that already have a stored fit.
+    progress : bool
+    median : bool
+        Also replay each rung at its posterior median (`score_ladder`).
+
+    Returns
+    -------
+    list of LadderResult, in the order of `pass_ids`
+    """
+    plan = plan or LadderPlan()
+    observed = [archive.get(p) for p in pass_ids]
+    planned = [(o, config) for o in observed for _, config in plan.configs(o)]
+    if not planned:
+        raise ValueError("the ladder has no rungs; give [ladder] rungs (or [objects.NORAD] rungs) in its configuration")
+    failures: dict[str, dict[str, str]] = {o.pass_id: {} for o in observed}
+    groups = []
+    for o, config in planned:
+        if getattr(o, "tle", None) is None and getattr(o, "omm", None) is None:
+            # The geometry needs the orbit: a pass without elements cannot be fitted at all.
+            failures[o.pass_id][config.name] = "the pass carries no TLE or OMM record, so its geometry is unknown"
+        else:
+            groups.append((config, [o.pass_id]))
+    if not groups:
+        pass
+    elif in_process:
+        for config, (pass_id,) in groups:
+            if not restart and config.name in archive.result_names(pass_id, "fits"):
+                continue
+            try:
+                fit_pass(archive, pass_id, config, restart=restart, progress=progress)
+            except (ValueError, RuntimeError, LookupError) as error:
+                failures[pass_id][config.name] = f"{type(error).__name__}: {error}"
+    else:
+        outcomes = run_campaigns(
+            archive, groups, scheduler=scheduler, n_workers=n_workers, restart=restart, progress=progress
+        )
+        for (config, _), outcome in zip(groups, outcomes):
+            for pass_id, error in outcome.failed:
+                failures[pass_id][config.name] = error
+    return [score_ladder(archive, o.pass_id, plan, failures[o.pass_id], median=median) for o in observed]

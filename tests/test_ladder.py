@@ -1,0 +1,175 @@
+"""The model ladder: rung configurations, the choice by held-out RMS, the configuration file's
+errors, the command line, and (slow) a ladder on an injected pass whose true shape is known."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from ingest import read_file
+from rsodb.archive import Archive
+from rsodb.campaign.ladder import (
+    LadderPlan,
+    LadderSettings,
+    Rung,
+    RungScore,
+    choose_rung,
+    run_ladder,
+    score_ladder,
+)
+from rsodb.cli import main
+from rsodb.fit.config import FitConfig
+from rsodb.fit.coverage import inject, window
+from rsodb.fit.runner import FitProblem
+from rsodb.report.ladder_report import build_ladder_report
+from tests.conftest import PROJECT_ROOT, TOPEX_PHV
+
+PLAN = {
+    "ladder": {
+        "name": "lad",
+        "train_fraction": 0.7,
+        "rungs": [{"shape": "ellipsoid", "attitude": "inertial"}, {"shape": "box", "attitude": "inertial"}],
+    },
+    "fit": {
+        "model": {"n_sub": 1},
+        "parameters": {"spin_period_s": {"kind": "uniform", "low": 9.7, "high": 10.0}},
+        "sampler": {"n_walkers": 12, "n_steps": 60, "search_maxiter": 15, "search_popsize": 8, "seed": 2},
+    },
+    "objects": {"22076": {"rungs": [{"shape": "ellipsoid", "attitude": "precessing"}]}},
+}
+
+
+def _score(rung: str, n_parameters: int, rms: float) -> RungScore:
+    shape, attitude = rung.split("-")
+    return RungScore(rung, shape, attitude, f"lad.{rung}", "ok", n_parameters, rms, rms, n_heldout=200)
+
+
+def test_symmetric_shapes_double_the_period_prior_and_fit_the_first_part():
+    base = FitConfig.from_dict({"parameters": {"spin_period_s": {"from": "periods", "width": 0.03}}})
+    ellipsoid = Rung("ellipsoid", "precessing").config(base, "lad", 120.0)
+    topex = Rung("topex", "precessing").config(base, "lad", 120.0)
+    # The ellipsoid looks the same after half a turn: its spin period is twice the light curve's.
+    assert ellipsoid.parameters["spin_period_s"]["multiple"] == 2.0
+    assert topex.parameters["spin_period_s"].get("multiple", 1.0) == 1.0
+    assert ellipsoid.name == "lad.ellipsoid-precessing" and ellipsoid.model.shape == "ellipsoid"
+    assert (ellipsoid.data.start_s, ellipsoid.data.duration_s) == (0.0, 120.0)
+    assert topex.parameters["spin_period_s"]["width"] == 0.03
+
+
+def test_the_simplest_rung_within_the_margin_is_chosen():
+    rng = np.random.default_rng(0)
+    noise = rng.normal(0.0, 0.5, 400)
+    settings = LadderSettings(rungs=(), margin_floor_mag=0.02, bootstrap=200)
+    simple, detailed = _score("ellipsoid-inertial", 5, 0.5), _score("box-precessing", 6, 0.49)
+    # Residuals 1% apart everywhere: the difference (0.005 mag) is below the 0.02 mag floor.
+    residuals = {simple.rung: noise, detailed.rung: 0.99 * noise}
+    scores, chosen, best = choose_rung([simple, detailed], residuals, 20, settings)
+    assert (chosen, best) == ("ellipsoid-inertial", "box-precessing")
+    # The same residuals scaled the same way resample to the same difference: no spread.
+    assert scores[0].heldout_se_mag == pytest.approx(0.0, abs=0.01)
+
+    much_better = _score("box-precessing", 6, 0.25)
+    residuals = {simple.rung: noise, much_better.rung: 0.5 * noise}
+    _, chosen, best = choose_rung([simple, much_better], residuals, 20, settings)
+    assert chosen == best == "box-precessing"
+
+
+def test_a_noisy_difference_widens_the_margin_beyond_the_floor():
+    rng = np.random.default_rng(1)
+    settings = LadderSettings(rungs=(), margin_floor_mag=0.0, bootstrap=300)
+    # 40 held-out samples of independent noise, RMS 0.52 against 0.50: with no floor, only the
+    # bootstrap's standard error can keep the simpler rung.
+    a, b = rng.normal(0, 0.5, 40), rng.normal(0, 0.5, 40)
+    a *= 0.52 / np.sqrt(np.mean(a**2))
+    b *= 0.50 / np.sqrt(np.mean(b**2))
+    simple, detailed = _score("ellipsoid-inertial", 5, 0.52), _score("box-inertial", 5, 0.50)
+    scores, chosen, _ = choose_rung([simple, detailed], {simple.rung: a, detailed.rung: b}, 1, settings)
+    # Independent residuals: var(RMS) ~ sigma^2 / (2 n) each, so the difference has a standard error
+    # ~ sigma / sqrt(n) = 0.5 / sqrt(40) = 0.08 mag; the bootstrap lands within a factor of two of it.
+    assert 0.04 < scores[0].heldout_se_mag < 0.16
+    assert chosen == "ellipsoid-inertial"
+
+
+def test_failed_rungs_are_skipped_and_nothing_scored_chooses_nothing():
+    settings = LadderSettings(rungs=())
+    failed = RungScore("box-inertial", "box", "inertial", "lad.box-inertial", "failed: ValueError: no TLE")
+    ok = _score("ellipsoid-precessing", 6, 0.4)
+    _, chosen, best = choose_rung([failed, ok], {ok.rung: np.full(50, 0.4)}, 5, settings)
+    assert chosen == best == "ellipsoid-precessing"
+    assert choose_rung([failed], {}, 5, settings)[1:] == ("", "")
+
+
+@pytest.mark.parametrize(
+    ("record", "message"),
+    [
+        ({"ladder": {"rungs": [{"shape": "cube", "attitude": "inertial"}]}}, "shape='cube' is not one of"),
+        ({"ladder": {"rungs": [{"shape": "box"}]}}, "a ladder rung needs shape and attitude"),
+        ({"ladder": {"train_fraction": 1.0}}, "train_fraction=1.0 must be within 0.2..0.95"),
+        ({"ladder": {"margin": 0.1}}, "[ladder] has unknown keys ['margin']"),
+        ({"objects": {"topex": {}}}, "[objects.topex] must be a NORAD number"),
+        ({"fits": {}}, "unknown sections ['fits']"),
+    ],
+)
+def test_bad_configurations_say_what_to_fix(record, message):
+    with pytest.raises(ValueError) as error:
+        LadderPlan.from_dict(record)
+    assert message in str(error.value)
+
+
+def test_the_real_passes_configurations_read():
+    plan = LadderPlan.from_toml(PROJECT_ROOT / "configs" / "real_passes.toml")
+    names = [r.name for r in plan.rungs_for(22076)]
+    assert "topex-precessing" in names and names[0] == "ellipsoid-inertial"
+    assert plan.base_for(44517).parameters["spin_period_s"]["force"] is True
+    whole = FitConfig.from_toml(PROJECT_ROOT / "configs" / "topex_whole_pass.toml")
+    assert (whole.model.shape, whole.data.duration_s) == ("topex", 0.0)
+
+
+@pytest.fixture(scope="module")
+def injected(tmp_path_factory):
+    """A 60 s pass of the ellipsoid with an inertial spin (pole RA 40, Dec 60 deg), 0.02 mag noise."""
+    observed = read_file(TOPEX_PHV)[0]
+    template = window(observed, 100.0, 60.0, bin_size=4)
+    truth = {"spin_period_s": 9.86, "spin_phase_deg": 30.0, "pole_ra_deg": 40.0, "pole_dec_deg": 60.0}
+    config = FitConfig.from_dict(
+        {"model": {"shape": "ellipsoid", "attitude": "inertial", "n_sub": 1}, "parameters": PLAN["fit"]["parameters"]}
+    )
+    model = FitProblem.build(template, config).posterior.model
+    archive = Archive(tmp_path_factory.mktemp("ladder") / "archive")
+    archive.add([inject(template, model, truth, noise_mag=0.02, rng=np.random.default_rng(3))])
+    return archive
+
+
+def test_score_only_on_an_unfitted_pass_lists_every_rung_as_not_fitted(injected, tmp_path, capsys):
+    path = tmp_path / "ladder.toml"
+    path.write_text('[ladder]\nname = "lad"\nrungs = [{shape = "box", attitude = "inertial"}]\n')
+    assert main(["ladder", "--archive", str(injected.path), "--config", str(path), "--score-only", "--json"]) == 0
+    (ladder,) = json.loads(capsys.readouterr().out)["ladders"]
+    assert ladder["chosen"] == "" and ladder["scores"][0]["status"] == "not fitted"
+
+
+@pytest.mark.slow
+def test_the_ladder_chooses_the_true_shape_on_held_out_samples(injected, tmp_path):
+    plan = LadderPlan.from_dict(PLAN)
+    (pass_id,) = [row.pass_id for row in injected.catalog()]
+    (ladder,) = run_ladder(injected, [pass_id], plan, in_process=True, progress=False)
+    assert {s.rung for s in ladder.scores} == {"ellipsoid-inertial", "box-inertial", "ellipsoid-precessing"}
+    assert all(s.status == "ok" for s in ladder.scores)
+    truth = ladder.score("ellipsoid-inertial")
+    # The model that made the data predicts the unseen 30% near its 0.02 mag noise (0.1 mag allows a
+    # short chain's period error carried over 18 s); the box cannot follow it.
+    assert truth.heldout_rms_mag < 0.1
+    assert ladder.score("box-inertial").heldout_rms_mag > truth.heldout_rms_mag + 0.05
+    # The precessing rung has more parameters: chosen only if it beat the truth by more than the margin.
+    assert ladder.chosen == "ellipsoid-inertial"
+    assert "lad.ellipsoid-inertial" in injected.result_names(pass_id, "fits")
+
+    # Replayed at the posterior median (predict_fit), the true model predicts as well.
+    replayed = score_ladder(injected, pass_id, plan, median=True).score("ellipsoid-inertial")
+    assert replayed.median_heldout_rms_mag < 0.1
+
+    page = build_ladder_report(injected, [ladder]).write(tmp_path / "ladder.html").read_text()
+    assert page.count("<img") == 2 and "held-out RMS (mag)" in page
+    assert f"<td>{ladder.chosen}</td>" in page and "<td>chosen</td>" in page
