@@ -212,3 +212,20 @@ def test_accuracy_out_of_reach_is_a_clear_error():
         r"more halving, or give pixel_size_m directly",
     ):
         DirectRenderer.from_accuracy(scene, sun, obs, accuracy_mag=1e-4, max_pixels_per_frame=200_000)
+
+
+def test_auto_falls_back_to_the_cache_when_the_direct_accuracy_is_out_of_reach(monkeypatch):
+    import raycast.renderer.methods as methods
+    from raycast.renderer.direct import AccuracyOutOfReach
+
+    def out_of_reach(*arguments):
+        raise AccuracyOutOfReach("accuracy_mag=0.005 is out of reach for plate")
+
+    plate = Scene.from_parts([Part.box("plate", (1.0, 1.0, 0.01), "m")], {"m": Lambertian(0.5)})
+    sun = obs = unit(np.array([[0.0, 0.2, 1.0], [0.1, 0.0, 1.0]]))
+    monkeypatch.setitem(methods.METHODS, "direct", out_of_reach)
+    with pytest.warns(RuntimeWarning, match="out of reach for plate; rendering with the cached method instead"):
+        model = render(plate, geometry(sun, obs))  # 2 directions: "auto" picks direct first
+    assert model.method == "cached" and np.all(model.intensity_m2_sr > 0.0)
+    with pytest.raises(AccuracyOutOfReach):
+        render(plate, geometry(sun, obs), method="direct")  # asked for by name: the error stands

@@ -49,13 +49,18 @@ from raycast.renderer.refine import AdaptiveSampler, EdgeTopology, coarse_levels
 from raycast.renderer.scene import Scene
 from raycast.renderer.shading import disk_shading
 
-__all__ = ["DirectRenderer", "SAMPLINGS", "convex_groups"]
+__all__ = ["DirectRenderer", "AccuracyOutOfReach", "SAMPLINGS", "convex_groups"]
 
 SAMPLINGS = ("adaptive", "grid", "raster")
 
 _PLASTIC = 1.32471795724474602596
 _MAX_RAYS_PER_BATCH = 1_500_000
 _TILE = 8
+
+
+class AccuracyOutOfReach(ValueError):
+    """The requested accuracy needs more rays per frame than allowed (a glint or shadow edge
+    narrower than the finest sampling)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -122,7 +127,7 @@ class DirectRenderer:
 
         Raises
         ------
-        ValueError
+        AccuracyOutOfReach
             When the accuracy needs more than ``max_pixels_per_frame`` rays per frame.
         """
         sun_body, obs_body = check_directions(sun_body, obs_body)
@@ -149,7 +154,7 @@ class DirectRenderer:
                     if math.isfinite(change)
                     else "relax accuracy_mag"
                 )
-                raise ValueError(
+                raise AccuracyOutOfReach(
                     f"accuracy_mag={accuracy_mag} is out of reach for {scene.name} within max_pixels_per_frame="
                     f"{max_pixels_per_frame}: at {2 * pixel:.3g} m pixels two successive pixel sizes still differ by "
                     f"{reached} (a glint or shadow edge narrower than the sampling); {relax}, raise "

@@ -33,7 +33,7 @@ import numpy as np
 
 from raycast.renderer import photometry
 from raycast.renderer.cache import SceneCache
-from raycast.renderer.direct import DirectRenderer
+from raycast.renderer.direct import AccuracyOutOfReach, DirectRenderer
 from raycast.renderer.rays import SUN_RADIUS_RAD
 from raycast.renderer.scene import Scene
 
@@ -181,15 +181,24 @@ def render(
         scene = scene.with_parameters(**parameters)
     n, k = sunlit.shape
     lit = sunlit.reshape(-1) > 0.0
+    chosen = method
     if method == "auto":
         method = "cached" if cache is not None or lit.sum() > AUTO_CACHE_MIN_DIRECTIONS else "direct"
     _warn_undersampled_glints(scene, sun, obs)
     flat = np.zeros(n * k)
     settings = {}
     if lit.any():
-        values, settings = METHODS[method](
-            scene, sun.reshape(-1, 3)[lit], obs.reshape(-1, 3)[lit], accuracy_mag, cache, pixel_size_m, progress
-        )
+        arguments = (scene, sun.reshape(-1, 3)[lit], obs.reshape(-1, 3)[lit], accuracy_mag, cache, pixel_size_m)
+        try:
+            values, settings = METHODS[method](*arguments, progress)
+        except AccuracyOutOfReach as error:
+            if chosen != "auto":
+                raise
+            # "auto" promises a light curve: the cache samples every direction pair without
+            # refining a pixel grid, so a glint too narrow for the grid still gets its share.
+            warnings.warn(f"{error}; rendering with the cached method instead", RuntimeWarning, stacklevel=2)
+            method = "cached"
+            values, settings = METHODS[method](*arguments, progress)
         flat[lit] = values
     intensity = (flat.reshape(n, k) * sunlit * weights[None, :]).sum(axis=1)
     return LightCurveModel(intensity, range_km, phase, str(band).upper(), method, settings)
