@@ -7,8 +7,9 @@ import warnings
 import numpy as np
 import pytest
 
+from raycast.renderer import methods
 from raycast.renderer.brdf import GGX, Lambertian
-from raycast.renderer.direct import DirectRenderer
+from raycast.renderer.direct import AccuracyOutOfReach, DirectRenderer
 from raycast.renderer.methods import GlintUndersampledWarning, render
 from raycast.renderer.scene import Part, Scene
 from tests.conftest import MODELS
@@ -215,9 +216,6 @@ def test_accuracy_out_of_reach_is_a_clear_error():
 
 
 def test_auto_falls_back_to_the_cache_when_the_direct_accuracy_is_out_of_reach(monkeypatch):
-    import raycast.renderer.methods as methods
-    from raycast.renderer.direct import AccuracyOutOfReach
-
     def out_of_reach(*arguments):
         raise AccuracyOutOfReach("accuracy_mag=0.005 is out of reach for plate")
 
