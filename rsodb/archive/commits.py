@@ -185,7 +185,7 @@ class ObjectTransaction:
                 before,
                 layout.read_catalog(file),
                 layout.read_duplicates(file),
-                # Attributes cost ~0.1 ms each through h5py: only those a commit uses.
+                # Attributes are slow to read through h5py (bench/archive_scale.py): only those a commit uses.
                 {name: file.attrs[name] for name in _ROOT_ATTRS if name in file.attrs},
             )
         except (OSError, RuntimeError, KeyError, ValueError) as exc:
@@ -385,7 +385,7 @@ def stage_files(transaction: ObjectTransaction, norad: int, files: Sequence[Pend
         if "results" not in file and current.before is not None and current.results:
             layout.write_results(file, current.results)  # a schema-1 file: its results get their table
         file.attrs["freed_bytes"] = freed
-        # Attributes cost ~0.1 ms each: write the object's name only when it changes.
+        # Attributes are slow to write through h5py: write the object's name only when it changes.
         for key, value in (("name", name), ("cospar", cospar)):
             if value and attr_text(current.attrs.get(key, "")) != value:
                 file.attrs[key] = value
