@@ -153,7 +153,7 @@ def test_score_only_on_an_unfitted_pass_lists_every_rung_as_not_fitted(injected,
 @pytest.mark.slow
 def test_the_ladder_chooses_the_true_shape_on_held_out_samples(injected, tmp_path):
     plan = LadderPlan.from_dict(PLAN)
-    (pass_id,) = [row.pass_id for row in injected.catalog()]
+    (pass_id,) = [row.pass_id for row in injected.summaries()]
     (ladder,) = run_ladder(injected, [pass_id], plan, in_process=True, progress=False)
     assert {s.rung for s in ladder.scores} == {"ellipsoid-inertial", "box-inertial", "ellipsoid-precessing"}
     assert all(s.status == "ok" for s in ladder.scores)

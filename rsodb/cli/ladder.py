@@ -67,7 +67,7 @@ def _ingest(archive, paths, progress: bool) -> None:
     if report.failed:
         raise ValueError(f"{len(report.failed)} file(s) failed to ingest; run 'rsodb ingest' on them for the reasons")
     missing = sorted(
-        {row.norad for row in archive.catalog() if "default" not in archive.result_names(row.pass_id, "periods")}
+        {row.norad for row in archive.summaries() if "default" not in archive.result_names(row.pass_id, "periods")}
     )
     for norad in missing:
         rsodb.campaign.survey_periods(archive, norad, progress=progress)
@@ -84,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
         if args.passes:
             pass_ids = [archive.get(p).pass_id for p in args.passes]
         else:
-            pass_ids = [row.pass_id for row in archive.catalog(args.object)]
+            pass_ids = [row.pass_id for row in archive.summaries(args.object)]
         if not pass_ids:
             raise LookupError(f"the archive has no passes{f' of NORAD {args.object}' if args.object else ''}")
         if args.score_only:
