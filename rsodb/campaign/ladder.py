@@ -16,14 +16,13 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 import math
 from pathlib import Path
-import tomllib
 from types import MappingProxyType
 from typing import Any
 
 import numpy as np
 
 from rsodb.campaign.fit_campaign import run_campaigns
-from rsodb.fit.config import PERIODS_PRIOR, FitConfig
+from rsodb.fit.config import PERIODS_PRIOR, FitConfig, read_toml
 from rsodb.fit.model import ATTITUDES
 from rsodb.fit.prediction import predict_fit
 from rsodb.fit.result import FitResult
@@ -184,15 +183,7 @@ class LadderPlan:
     @classmethod
     def from_toml(cls, path: str | Path) -> LadderPlan:
         path = Path(path)
-        try:
-            with open(path, "rb") as handle:
-                record = tomllib.load(handle)
-        except FileNotFoundError:
-            raise FileNotFoundError(
-                f"ladder configuration {path} does not exist; give the path of a .toml file"
-            ) from None
-        except tomllib.TOMLDecodeError as error:
-            raise ValueError(f"{path}: not valid TOML ({error})") from None
+        record = read_toml(path, "ladder configuration")
         try:
             return cls.from_dict(record)
         except (TypeError, ValueError) as error:

@@ -22,7 +22,7 @@ from rsodb.fit.priors import Uniform, prior_from_dict
 from rsodb.fit.sampler import SamplerSettings
 from rsodb.fit.shapes import SHAPES, articulation_from_dict
 
-__all__ = ["FitConfig", "ModelConfig", "DataConfig", "LikelihoodConfig", "PERIODS_PRIOR"]
+__all__ = ["FitConfig", "ModelConfig", "DataConfig", "LikelihoodConfig", "PERIODS_PRIOR", "read_toml"]
 
 # The default spin-period prior: +-1% around the stored (sidereal) period.
 PERIODS_PRIOR = MappingProxyType(
@@ -159,6 +159,17 @@ def _check_parameter_spec(name: str, spec) -> None:
         Parameter(name, prior)  # checks wrap windows of angles
 
 
+def read_toml(path: Path, what: str) -> dict:
+    """The record of a TOML file; `what` names the file in the errors (missing or invalid)."""
+    try:
+        with open(path, "rb") as handle:
+            return tomllib.load(handle)
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{what} {path} does not exist; give the path of a .toml file") from None
+    except tomllib.TOMLDecodeError as error:
+        raise ValueError(f"{path}: not valid TOML ({error})") from None
+
+
 @dataclass(frozen=True)
 class FitConfig:
     """Everything that defines a fit (see the module docstring for the TOML form)."""
@@ -216,13 +227,7 @@ class FitConfig:
     def from_toml(cls, path: str | Path) -> FitConfig:
         """Read a TOML fit configuration."""
         path = Path(path)
-        try:
-            with open(path, "rb") as handle:
-                record = tomllib.load(handle)
-        except FileNotFoundError:
-            raise FileNotFoundError(f"fit configuration {path} does not exist; give the path of a .toml file") from None
-        except tomllib.TOMLDecodeError as error:
-            raise ValueError(f"{path}: not valid TOML ({error})") from None
+        record = read_toml(path, "fit configuration")
         model = record.get("model")
         if isinstance(model, dict):
             # Mesh paths in a file are relative to the file, wherever the fit runs from.
