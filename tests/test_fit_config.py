@@ -191,6 +191,9 @@ def test_fit_command_fits_a_stored_pass_and_prints_json(tmp_path, capsys):
     # Without a stored period the default prior cannot be built: a one-line error, status 2.
     assert main(["fit", pass_id, "--archive", str(archive.path), "--steps", "5"]) == 2
     assert "rsodb fit: error: spin_period_s takes its prior from the stored period" in capsys.readouterr().err
+    # An absurd step count is refused before any work, not met as an overflow mid-run.
+    assert main(["fit", pass_id, "--archive", str(archive.path), "--steps", str(10**20)]) == 2
+    assert "n_steps=100000000000000000000 must be a whole number from 1 to 1e+09" in capsys.readouterr().err
 
 
 def test_a_weak_stored_period_names_the_force_flag_and_the_flag_works():

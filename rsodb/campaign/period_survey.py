@@ -21,13 +21,17 @@ import time
 from rsodb.archive import Archive
 from rsodb.periods.analysis import analyse_pass
 from rsodb.periods.search import DEFAULT_RESULT_NAME, PeriodResult, PeriodSettings
-from rsodb.pool import imap_in_pool
+from rsodb.pool import default_processes, imap_in_pool
 
 __all__ = ["survey_periods", "PeriodSurvey", "load_period_results"]
 
 # Results held before a batched store (each store rewrites the object's file once).
 STORE_EVERY = 200
 STORE_EVERY_S = 30.0
+# A spawned worker takes ~3 s to import the search (numpy, scipy, skyfield) and a pass takes
+# ~1 s: by default each worker gets at least this many passes, so a handful run in this process
+# (3 TOPEX passes: 3.0 s here against 7.3 s through a two-worker pool).
+PASSES_PER_WORKER = 8
 
 
 @dataclass(frozen=True)
@@ -104,7 +108,8 @@ def survey_periods(
     name : str
         Name under which results are stored (``"default"``); storing again replaces them.
     processes : int, optional
-        Worker processes (default: the usable cores; 1 = in this process).
+        Worker processes (default: the usable cores, at most one per `PASSES_PER_WORKER` passes;
+        1 = in this process).
     progress : bool
         Show a progress bar.
     store : bool
@@ -119,6 +124,8 @@ def survey_periods(
     settings = settings or PeriodSettings()
     rows = archive.summaries(norad, band)
     tasks = [(str(archive.path), row.pass_id, settings.to_dict(), geometry) for row in rows]
+    if processes is None:
+        processes = max(1, min(default_processes(), len(tasks) // PASSES_PER_WORKER))
     results, failures, unstored = [], [], []
     last_store_s = time.monotonic()
     try:

@@ -38,7 +38,9 @@ def register(subparsers) -> None:
     parser.add_argument("--object", type=int, metavar="NORAD", help="only this object (NORAD number)")
     parser.add_argument("--band", help="only this band, e.g. V")
     parser.add_argument("--json", action="store_true", help="print the results as JSON instead of a table")
-    parser.add_argument("--processes", type=int, metavar="N", help="worker processes (default: all cores)")
+    parser.add_argument(
+        "--processes", type=int, metavar="N", help="worker processes (default: all cores, one per 8 passes at most)"
+    )
     parser.add_argument("--name", default="default", help="stored result name (default: %(default)s)")
     parser.add_argument("--min-cycles", type=float, metavar="C", help="fewest cycles for a period (default 3)")
     parser.add_argument("--no-store", action="store_true", help="print only; leave the archive unchanged")

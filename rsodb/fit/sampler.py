@@ -64,6 +64,9 @@ CONVERGED_TAUS = 50
 BURN_IN_TAUS = 5
 # Autocorrelation estimates counted as steady when they moved by less than this between checks.
 _STEADY = 0.1
+# Largest count a sampler setting takes (steps, walkers, ...): far above any real fit, and below
+# what the chain's HDF5 dataset and numpy's integers hold, so a typo fails here, not mid-run.
+MAX_COUNT = 10**9
 
 
 @dataclass(frozen=True)
@@ -140,8 +143,8 @@ class SamplerSettings:
             "check_every",
         ):
             value = getattr(self, name)
-            if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or value < 1:
-                raise ValueError(f"sampler setting {name}={value!r} must be a positive integer")
+            if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or not 1 <= value <= MAX_COUNT:
+                raise ValueError(f"sampler setting {name}={value!r} must be a whole number from 1 to {MAX_COUNT:.0e}")
         if self.moves not in MOVES:
             raise ValueError(f"sampler setting moves={self.moves!r} is not one of {', '.join(MOVES)}")
         if self.init not in INITIALISERS:
