@@ -125,7 +125,7 @@ def test_pipeline_on_the_samples_writes_reports_and_fits_near_the_truth(tmp_path
             # mean light-curve rate, 9.8108 vs 9.8299 s on the R-band pass; below the 0.4-0.6%
             # between that and the spin_period_s convention, 9.87 s), or the index page says
             # not to trust it: a 60-step chain from a 40-point search can settle in a wrong
-            # mode (on the V-band pass, a 85 deg precession cone, 0.3% off), never silently.
+            # mode (on the V-band pass, an 85 deg precession cone, 0.3% off), never silently.
             trust = assess(fit_result, load_periods(archive, row.pass_id))
             assert error < 3e-3 * apparent or trust.level == "low", (stored.source_name, light_curve, trust)
             recovered += error < 3e-3 * apparent
