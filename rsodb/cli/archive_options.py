@@ -1,4 +1,4 @@
-"""The ``--archive DIR`` option and error reporting shared by the archive commands.
+"""The ``--archive DIR`` option, the Dask options and error reporting shared by the commands.
 
 Without ``--archive`` a command uses ``$RSODB_ARCHIVE`` when it is set, else ``./archive``.
 """
@@ -15,6 +15,8 @@ import rsodb
 __all__ = [
     "add_archive_option",
     "add_max_age_option",
+    "add_dask_options",
+    "workers_of",
     "max_age_days",
     "open_archive",
     "archive_location",
@@ -25,6 +27,19 @@ __all__ = [
 
 ARCHIVE_ENV = "RSODB_ARCHIVE"
 DEFAULT_ARCHIVE = "archive"
+
+
+def add_dask_options(parser: argparse.ArgumentParser) -> None:
+    """Add ``--scheduler ADDRESS`` and ``--workers N``, the Dask cluster of a campaign of fits."""
+    parser.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler address (default: a LocalCluster)")
+    parser.add_argument("--workers", type=int, metavar="N", help="LocalCluster workers (default: one per core)")
+
+
+def workers_of(args: argparse.Namespace) -> int | None:
+    """``--workers``, checked: None (one per core) or a count of at least 1."""
+    if args.workers is not None and args.workers < 1:
+        raise ValueError(f"--workers {args.workers} must be at least 1")
+    return args.workers
 
 
 def add_archive_option(parser: argparse.ArgumentParser) -> None:

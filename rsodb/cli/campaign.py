@@ -6,7 +6,7 @@ import argparse
 import json
 
 import rsodb
-from rsodb.cli.archive_options import add_archive_option, fail, open_archive
+from rsodb.cli.archive_options import add_archive_option, add_dask_options, fail, open_archive, workers_of
 from rsodb.cli.fit import add_fit_options, config_from_args
 
 __all__ = ["register", "run"]
@@ -42,8 +42,7 @@ def register(subparsers) -> None:
     parser.add_argument("--passes", nargs="+", metavar="PASS", help="fit only these passes (ids or prefixes)")
     parser.add_argument("--band", help="only passes in this band")
     add_fit_options(parser)
-    parser.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler address (default: a LocalCluster)")
-    parser.add_argument("--workers", type=int, metavar="N", help="LocalCluster workers (default: one per core)")
+    add_dask_options(parser)
     parser.add_argument("--restart", action="store_true", help="refit passes that already have this fit")
     parser.add_argument("--report", metavar="FILE.html", help="write the campaign report here when done")
     parser.add_argument("--json", action="store_true", help="print the outcome as JSON")
@@ -55,8 +54,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         archive = open_archive(args)
         config = config_from_args(args)
-        if args.workers is not None and args.workers < 1:
-            raise ValueError(f"--workers {args.workers} must be at least 1")
+        workers = workers_of(args)
         outcome = rsodb.campaign.run_campaign(
             archive,
             args.object,
@@ -64,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
             band=args.band,
             config=config,
             scheduler=args.scheduler,
-            n_workers=args.workers,
+            n_workers=workers,
             restart=args.restart,
             progress=not (args.quiet or args.json),
         )

@@ -6,7 +6,7 @@ import argparse
 import json
 
 import rsodb
-from rsodb.cli.archive_options import add_archive_option, fail, open_archive
+from rsodb.cli.archive_options import add_archive_option, add_dask_options, fail, open_archive, workers_of
 
 __all__ = ["register", "run"]
 
@@ -42,8 +42,7 @@ def register(subparsers) -> None:
     parser.add_argument("--ingest", nargs="+", metavar="PATH", help="first ingest these files or directories")
     parser.add_argument("--object", type=int, metavar="NORAD", help="only the passes of this object")
     parser.add_argument("--passes", nargs="+", metavar="PASS", help="only these passes (ids or prefixes)")
-    parser.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler address (default: a LocalCluster)")
-    parser.add_argument("--workers", type=int, metavar="N", help="LocalCluster workers (default: one per core)")
+    add_dask_options(parser)
     parser.add_argument("--in-process", action="store_true", help="fit here, one rung after another, without Dask")
     parser.add_argument("--restart", action="store_true", help="refit rungs that already have a stored fit")
     parser.add_argument("--score-only", action="store_true", help="fit nothing; score the stored rungs")
@@ -79,8 +78,7 @@ def run(args: argparse.Namespace) -> int:
         if args.ingest:
             _ingest(archive, args.ingest, progress=not (args.quiet or args.json))
         plan = rsodb.campaign.LadderPlan.from_toml(args.config)
-        if args.workers is not None and args.workers < 1:
-            raise ValueError(f"--workers {args.workers} must be at least 1")
+        workers = workers_of(args)
         if args.passes:
             pass_ids = [archive.get(p).pass_id for p in args.passes]
         else:
@@ -95,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
                 pass_ids,
                 plan,
                 scheduler=args.scheduler,
-                n_workers=args.workers,
+                n_workers=workers,
                 in_process=args.in_process,
                 restart=args.restart,
                 progress=not (args.quiet or args.json),

@@ -12,7 +12,7 @@ from pathlib import Path
 import sys
 
 import rsodb
-from rsodb.cli.archive_options import add_archive_option, archive_location, fail
+from rsodb.cli.archive_options import add_archive_option, archive_location, fail, workers_of
 
 __all__ = ["register", "run"]
 
@@ -54,8 +54,7 @@ def register(subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     quiet = args.quiet or args.json
     try:
-        if args.workers is not None and args.workers < 1:
-            raise ValueError(f"--workers {args.workers} must be at least 1")
+        workers = workers_of(args)
         config = rsodb.fit.FitConfig.from_toml(args.fit_config) if args.fit_config else None
         summary = rsodb.pipeline.run_pipeline(
             args.data_dir,
@@ -63,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
             args.out,
             fit_config=config,
             fit_name=args.fit_name,
-            workers=args.workers,
+            workers=workers,
             fit=not args.no_fit,
             progress=not quiet,
             log=(lambda line: print(line, file=sys.stderr)) if args.json else print,
