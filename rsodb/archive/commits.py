@@ -6,6 +6,12 @@ beside it (a byte copy plus appends, or a repacked copy once replaced tables hav
 dead space), close it. `publish` then makes a whole round of staged objects durable with one
 file-system flush, renames each over its object file (each rename is that object's atomic commit
 point), flushes the directory, and records the new files in the catalog index.
+
+An ingest's reader processes stage too, without the lock, into a private directory
+(`temp_dir`): `hand_over` keeps those files for the committing process, which `adopt`s one under
+the lock only if the object file is still the one that was copied (the same inode, size and
+modification time), and stages the object itself otherwise. Either way what is published was
+built from the object's current state.
 """
 
 from __future__ import annotations
@@ -121,18 +127,23 @@ class ObjectTransaction:
     Parameters
     ----------
     objects_dir : Path
-    index : CatalogIndex
+    index : CatalogIndex or None
+        None for a transaction that only stages and hands its files over.
     durable : bool
     lock_timeout_s : float or None
+    temp_dir : Path or None
+        Where next files are written (default: beside the object files); on the same file system.
     """
 
     objects_dir: Path
     index: object
     durable: bool = True
     lock_timeout_s: float | None = 600.0
+    temp_dir: Path | None = None
     staged: list[Staged] = field(default_factory=list)
     _stack: ExitStack = field(default_factory=ExitStack)
     _temp_names: set[str] | None = None
+    _locked: int = 0
 
     def __enter__(self) -> ObjectTransaction:
         return self
@@ -147,6 +158,7 @@ class ObjectTransaction:
         lock = ObjectLock(self.objects_dir / layout.lock_file_name(norad), timeout_s=self.lock_timeout_s)
         lock.acquire()
         self._stack.callback(lock.release)
+        self._locked += 1
         # Temporary files of killed writers of this object: listed once per round (a directory of
         # 20,000 objects costs milliseconds to list); any writer that held this lock is done by now.
         if self._temp_names is None:
@@ -156,18 +168,46 @@ class ObjectTransaction:
             (self.objects_dir / name).unlink(missing_ok=True)
             self._temp_names.discard(name)
 
+    def _temp_path(self, final: Path) -> Path:
+        tmp = temp_path(final)
+        return tmp if self.temp_dir is None else self.temp_dir / tmp.name
+
+    def hand_over(self) -> list[Staged]:
+        """The staged objects, for another process to `adopt`: their files are kept, not removed
+        at the end of the transaction. Only for a transaction that took no lock."""
+        if self._locked:
+            raise RuntimeError("a transaction holding object locks cannot hand its files over")
+        staged, self.staged = self.staged, []
+        self._stack.pop_all()  # the callbacks would remove the temporary files
+        return staged
+
+    def adopt(self, item: Staged) -> bool:
+        """Stage `item`, handed over by another transaction, if the object file is still the one it
+        was built from (call with the object's lock held); otherwise remove its file and return False."""
+        try:
+            now = os.stat(item.final)
+        except FileNotFoundError:
+            now = None
+        unchanged = item.before is None if now is None else item.before is not None and item.before.matches(now)
+        if not unchanged or not item.tmp.is_file():
+            item.tmp.unlink(missing_ok=True)
+            return False
+        self._stack.callback(item.tmp.unlink, missing_ok=True)  # removed unless renamed into place
+        self.staged.append(item)
+        return True
+
     def current(self, norad: int) -> Current:
         """Copy the object's file to a temporary file and open the copy: its state, and the start
         of its next state (`write` finishes it; `discard` drops it)."""
         final = self.objects_dir / layout.object_file_name(norad)
-        tmp = temp_path(final)
+        tmp = self._temp_path(final)
         self._stack.callback(tmp.unlink, missing_ok=True)  # removed unless renamed into place
         before = _copy(norad, final, tmp)
         if before is None:
             file = h5py.File(tmp, "w", libver=layout.LIBVER)
             layout.write_file_attributes(file, norad)
             file.create_group("passes")
-            return Current(file, tmp, final, None, [], [], {}, [])
+            return Current(file, tmp, final, None, [], [], {"schema_version": layout.SCHEMA_VERSION}, [])
         try:
             file = h5py.File(tmp, "r+", libver=layout.LIBVER)
         except (OSError, RuntimeError, ValueError) as exc:
@@ -175,19 +215,12 @@ class ObjectTransaction:
             raise DamagedObjectError(final, reason) from None
         self._stack.callback(file.close)  # closed by write or discard; here if staging fails
         try:
-            if "schema_version" not in file.attrs or "passes" not in file:
+            # Only the attributes a commit uses (they are slow to read, bench/archive_scale.py).
+            attrs = layout.get_attrs(file, _ROOT_ATTRS)
+            if "schema_version" not in attrs or "passes" not in file:
                 raise DamagedObjectError(final, "it is an HDF5 file without the archive's root attributes and groups")
-            layout.check_schema(file, final)
-            return Current(
-                file,
-                tmp,
-                final,
-                before,
-                layout.read_catalog(file),
-                layout.read_duplicates(file),
-                # Attributes are slow to read through h5py (bench/archive_scale.py): only those a commit uses.
-                {name: file.attrs[name] for name in _ROOT_ATTRS if name in file.attrs},
-            )
+            layout.check_schema_version(attrs["schema_version"], final)
+            return Current(file, tmp, final, before, layout.read_catalog(file), layout.read_duplicates(file), attrs)
         except (OSError, RuntimeError, KeyError, ValueError) as exc:
             file.close()
             if isinstance(exc, (DamagedObjectError, ValueError)) and not isinstance(exc, layout.DamagedPassError):
@@ -211,16 +244,17 @@ class ObjectTransaction:
                 _REPACK_MIN_BYTES, _REPACK_FRACTION * current.before.size
             ):
                 file.close()
-                packed = temp_path(current.final)
+                packed = self._temp_path(current.final)
                 self._stack.callback(packed.unlink, missing_ok=True)
                 with h5py.File(current.tmp, "r") as source:
                     file = _repacked(source, packed)
                 current.tmp.unlink()
                 current.tmp = packed
             build(file)
-            if int(file.attrs.get("schema_version", 0)) != layout.SCHEMA_VERSION:
-                file.attrs["schema_version"] = layout.SCHEMA_VERSION
-            file.attrs["updated_utc"] = utc_now()
+            stamp = {"updated_utc": utc_now()}
+            if int(current.attrs.get("schema_version", 0)) != layout.SCHEMA_VERSION:
+                stamp["schema_version"] = layout.SCHEMA_VERSION
+            layout.set_attrs(file, stamp)
         finally:
             file.close()
         return current.tmp
@@ -384,11 +418,10 @@ def stage_files(transaction: ObjectTransaction, norad: int, files: Sequence[Pend
             layout.write_duplicates(file, duplicates)
         if "results" not in file and current.before is not None and current.results:
             layout.write_results(file, current.results)  # a schema-1 file: its results get their table
-        file.attrs["freed_bytes"] = freed
-        # Attributes are slow to write through h5py: write the object's name only when it changes.
-        for key, value in (("name", name), ("cospar", cospar)):
-            if value and attr_text(current.attrs.get(key, "")) != value:
-                file.attrs[key] = value
+        # Attributes are slow to write: the object's name only when it changes.
+        changed = {key: value for key, value in (("name", name), ("cospar", cospar)) if value}
+        changed = {key: value for key, value in changed.items() if attr_text(current.attrs.get(key, "")) != value}
+        layout.set_attrs(file, {"freed_bytes": freed, **changed})
 
     results = current._results if current.before is not None else []  # None: unchanged, not read
     transaction.finish(norad, current, build, (name, cospar), rows, results, duplicates, event)

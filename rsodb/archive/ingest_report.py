@@ -202,8 +202,14 @@ class PendingFile:
         Content hash: a file whose hash is stored already is skipped.
     passes : tuple of Pass
         All of the same object.
+    prepared : Staged or None
+        The object's next file, staged by the reader process from the object file as it was
+        then (`rsodb.archive.commits.ObjectTransaction.hand_over`); the commit publishes it when
+        this is the object's only file in the round and the object file has not changed since,
+        and stages the file itself otherwise.
     """
 
     path: str
     sha256: str
     passes: tuple[Pass, ...]
+    prepared: object | None = None

@@ -1,7 +1,13 @@
 """The ingest pipeline: find files, read them in worker processes, commit per object in batches.
 
-Reading (parsing text) is the expensive part and runs in a process pool; the parent collects
-the passes per object and commits them in batches. A commit copies the object's current file, so
+Reading (parsing text) and writing each object's next HDF5 file are the expensive parts and run
+in a process pool: a reader parses a file and stages its object's next file from the object file
+as it is, in the run's private staging directory (`rsodb.archive.commits`); the parent collects
+the passes per object and commits them in batches, publishing a reader's file when it is the
+object's only file in the round and the object file has not changed since (a night of one new
+pass per object), and staging the object itself otherwise (many files of one object, or another
+writer in between). While most files of a round share their object with others, the readers stop
+staging (their work would be thrown away) until a round shows single files again. A commit copies the object's current file, so
 committing after every file would cost time quadratic in the object's size; committing too rarely
 would lose more work to a crash and hold more passes in memory. The parent therefore commits
 every `commit_interval_s` seconds, but never sooner than `_COMMIT_SPACING` times the duration of
@@ -14,9 +20,13 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
+from contextlib import ExitStack, contextmanager
 import hashlib
 import multiprocessing
+import os
 from pathlib import Path
+import secrets
+import shutil
 import time
 from typing import TYPE_CHECKING
 
@@ -28,8 +38,11 @@ from ingest.observation import Pass
 from ingest.problems import FileWarning
 from ingest.readers import read_file
 from ingest.textfile import open_regular_file
+from rsodb.archive import layout
+from rsodb.archive.commits import ObjectTransaction, stage_files
 from rsodb.archive.discovery import find_observation_files
 from rsodb.archive.ingest_report import CommitEvent, IngestReport, IngestWarning, PendingFile
+from rsodb.archive.locking import ObjectLock, remove_abandoned_staging
 from rsodb.pool import default_processes
 
 if TYPE_CHECKING:
@@ -43,13 +56,15 @@ _MAX_PENDING_BYTES = 256 << 20
 _MIN_FILES_FOR_POOL = 16
 _CHUNK_FILES = 4
 _READ_AHEAD_CHUNKS_PER_WORKER = 32
+# Readers stage objects' next files while at least this share of a round's files are the only
+# file of their object (below it, most of their staging would be thrown away).
+_SOLE_SHARE_FOR_STAGING = 0.5
 
-_known_sha256: frozenset[str] = frozenset()
+_reader: dict = {}
 
 
-def _init_worker(known_sha256: frozenset[str]) -> None:
-    global _known_sha256
-    _known_sha256 = known_sha256
+def _init_worker(known_sha256: frozenset[str], options: tuple) -> None:
+    _reader.update(known=known_sha256, options=options)
 
 
 def read_observation_file(path: str, known_sha256: frozenset[str] = frozenset()):
@@ -104,8 +119,81 @@ NO_ELEMENTS = (
 )
 
 
-def _read_chunk(paths: list[str]):
-    return [read_observation_file(path, _known_sha256) for path in paths]
+def _read_for_ingest(path: str, known: frozenset[str], options: tuple, stage_in: tuple[Path, Path] | None):
+    """Read one file, give its passes their orbital elements (or the note why not) and, given
+    ``stage_in = (objects_dir, staging_dir)``, stage each of its objects' next file.
+
+    Returns
+    -------
+    (path, sha256, passes, error, prepared)
+        As `read_observation_file`, the passes placed; `prepared` maps NORAD number to the
+        object's staged next file (`rsodb.archive.commits.Staged`).
+    """
+    elements, max_age_days = options
+    path, sha, passes, error = read_observation_file(path, known)
+    if passes is None:
+        return path, sha, passes, error, {}
+    placed = []
+    for pass_ in passes:
+        pass_, note = with_elements(pass_, elements, max_age_days)
+        if note:
+            pass_ = pass_.replace(warnings=(*pass_.warnings, FileWarning(None, note)))
+        placed.append(pass_)
+    placed = tuple(placed)
+    prepared = {} if stage_in is None else _prestage(*stage_in, printable_path(path), sha, placed)
+    return path, sha, placed, None, prepared
+
+
+def _discard(prepared) -> None:
+    if prepared is not None:
+        prepared.tmp.unlink(missing_ok=True)
+
+
+def _by_object(passes) -> dict[int, tuple[Pass, ...]]:
+    by_object: dict[int, list] = {}
+    for pass_ in passes:
+        by_object.setdefault(int(pass_.norad), []).append(pass_)
+    return {norad: tuple(items) for norad, items in by_object.items()}
+
+
+def _prestage(objects_dir: Path, staging_dir: Path, shown: str, sha: str, passes) -> dict:
+    """Each object's next file with these passes, staged without its lock from the object file as
+    it is now (the commit publishes it only if that is still so)."""
+    prepared = {}
+    for norad, object_passes in _by_object(passes).items():
+        transaction = ObjectTransaction(objects_dir, None, durable=False, temp_dir=staging_dir)
+        with transaction:
+            try:
+                stage_files(transaction, norad, [PendingFile(shown, sha, object_passes)])
+            except Exception:  # noqa: BLE001 - the commit stages this object itself and reports what is wrong
+                continue
+            for item in transaction.hand_over():
+                prepared[norad] = item
+    return prepared
+
+
+def _read_chunk(paths: list[str], stage_in: tuple[Path, Path] | None):
+    return [_read_for_ingest(path, _reader["known"], _reader["options"], stage_in) for path in paths]
+
+
+@contextmanager
+def _staging_directory(archive_path: Path):
+    """A private directory for this run's staged files under ``<archive>/staging``, removed at the
+    end; directories of runs that were killed are removed first (their lock is free)."""
+    root = archive_path / layout.STAGING_DIR
+    root.mkdir(exist_ok=True)
+    remove_abandoned_staging(root)
+    name = f"{os.getpid()}.{secrets.token_hex(4)}"
+    lock = ObjectLock(root / f"{name}.lock", timeout_s=0)
+    lock.acquire()
+    directory = root / name
+    try:
+        directory.mkdir()
+        yield directory
+    finally:
+        shutil.rmtree(directory, ignore_errors=True)
+        (root / f"{name}.lock").unlink(missing_ok=True)
+        lock.release()
 
 
 def _auto_workers(n_files: int) -> int:
@@ -147,12 +235,15 @@ def file_warnings(path: str, passes: tuple[Pass, ...]) -> list[IngestWarning]:
     return found
 
 
-def _results(files: list[Path], known: frozenset[str], workers: int):
-    """Yield read results in file order, reading ahead in `workers` processes (0: in this one)."""
+def _results(
+    files: list[Path], known: frozenset[str], workers: int, options: tuple, stage_in: Callable[[], tuple | None]
+):
+    """Yield read results in file order, reading ahead in `workers` processes (0: in this one,
+    staging nothing); each chunk is staged in ``stage_in()`` as it is when the chunk is queued."""
     paths = [str(path) for path in files]
     if workers == 0:
         for path in paths:
-            yield read_observation_file(path, known)
+            yield _read_for_ingest(path, known, options, None)
         return
     chunks = [paths[i : i + _CHUNK_FILES] for i in range(0, len(paths), _CHUNK_FILES)]
     # Read far enough ahead that the readers keep parsing while the parent commits (a commit
@@ -162,14 +253,14 @@ def _results(files: list[Path], known: frozenset[str], workers: int):
     # Embree or BLAS pool, a logging handler) can leave the reader waiting on it forever.
     context = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(
-        max_workers=workers, mp_context=context, initializer=_init_worker, initargs=(known,)
+        max_workers=workers, mp_context=context, initializer=_init_worker, initargs=(known, options)
     ) as pool:
         queued = deque()
         next_chunk = 0
         try:
             while queued or next_chunk < len(chunks):
                 while len(queued) < window and next_chunk < len(chunks):
-                    queued.append(pool.submit(_read_chunk, chunks[next_chunk]))
+                    queued.append(pool.submit(_read_chunk, chunks[next_chunk], stage_in()))
                     next_chunk += 1
                 yield from queued.popleft().result()
         finally:
@@ -204,53 +295,60 @@ def run_ingest(
     # More readers than cores only adds contention (and a huge number would exhaust the machine).
     workers = _auto_workers(len(files)) if workers is None else min(workers, default_processes())
 
-    pending: dict[int, list[PendingFile]] = {}
-    pending_sha: set[str] = set()
-    pending_bytes = 0
-    last_commit_end = time.monotonic()
-    last_commit_cost = 0.0
-
-    def commit_pending() -> None:
-        nonlocal pending_bytes, last_commit_end, last_commit_cost
-        began = time.monotonic()
-        events, failures = archive.commit_many(pending)
-        for event in events:
-            ingested.extend(event.ingested)
-            present.extend(event.already_present)
-            duplicates.extend(event.duplicates)
-            if on_commit is not None:
-                on_commit(event)
-        for norad, error in failures:
-            for item in pending[norad]:
-                failed.append(FormatError(item.path, None, f"not stored: {error}"))
-        pending.clear()
-        pending_sha.clear()
+    with ExitStack() as stack:
+        staging = stack.enter_context(_staging_directory(archive.path)) if workers else None
+        stage_in = (archive.objects_dir, staging)
+        pending: dict[int, list[PendingFile]] = {}
+        pending_sha: set[str] = set()
         pending_bytes = 0
         last_commit_end = time.monotonic()
-        last_commit_cost = last_commit_end - began
+        last_commit_cost = 0.0
+        prestaging = True
 
-    with tqdm(total=len(files), disable=not progress, unit="file", desc="ingest", dynamic_ncols=True) as bar:
-        for path, sha, passes, error in _results(files, known, workers):
+        def commit_pending() -> None:
+            nonlocal pending_bytes, last_commit_end, last_commit_cost, prestaging
+            began = time.monotonic()
+            events, failures = archive.commit_many(pending)
+            for event in events:
+                ingested.extend(event.ingested)
+                present.extend(event.already_present)
+                duplicates.extend(event.duplicates)
+                if on_commit is not None:
+                    on_commit(event)
+            for norad, error in failures:
+                for item in pending[norad]:
+                    failed.append(FormatError(item.path, None, f"not stored: {error}"))
+            round_files = [item for items in pending.values() for item in items]
+            for item in round_files:
+                _discard(item.prepared)  # those not published (a published file has left)
+            sole = sum(len(items) == 1 for items in pending.values())
+            prestaging = sole >= _SOLE_SHARE_FOR_STAGING * len(round_files)
+            pending.clear()
+            pending_sha.clear()
+            pending_bytes = 0
+            last_commit_end = time.monotonic()
+            last_commit_cost = last_commit_end - began
+
+        bar = stack.enter_context(
+            tqdm(total=len(files), disable=not progress, unit="file", desc="ingest", dynamic_ncols=True)
+        )
+        options = (elements, max_age_days)
+        for path, sha, passes, error, prepared in _results(
+            files, known, workers, options, lambda: stage_in if prestaging else None
+        ):
             bar.update(1)
             shown = printable_path(path)
             if error is not None:
                 failed.append(error)
             elif passes is None or sha in pending_sha:
                 present.append(shown)
+                for item in prepared.values():
+                    _discard(item)
             else:
                 pending_sha.add(sha)
-                placed = []
-                for pass_ in passes:
-                    pass_, note = with_elements(pass_, elements, max_age_days)
-                    if note:
-                        pass_ = pass_.replace(warnings=(*pass_.warnings, FileWarning(None, note)))
-                    placed.append(pass_)
-                warnings.extend(file_warnings(shown, tuple(placed)))
-                by_object: dict[int, list] = {}
-                for pass_ in placed:
-                    by_object.setdefault(int(pass_.norad), []).append(pass_)
-                for norad, object_passes in by_object.items():
-                    pending.setdefault(norad, []).append(PendingFile(shown, sha, tuple(object_passes)))
+                warnings.extend(file_warnings(shown, passes))
+                for norad, object_passes in _by_object(passes).items():
+                    pending.setdefault(norad, []).append(PendingFile(shown, sha, object_passes, prepared.get(norad)))
                 pending_bytes += sum(pass_.time_utc.nbytes * 11 for pass_ in passes)
             since = time.monotonic() - last_commit_end
             if pending and (

@@ -17,11 +17,22 @@ import fcntl
 import os
 from pathlib import Path
 import secrets
+import shutil
 import time
 
-__all__ = ["ObjectLock", "replacing", "temp_path", "publish", "stale_temp_files", "TEMP_SUFFIX"]
+__all__ = [
+    "ObjectLock",
+    "replacing",
+    "temp_path",
+    "publish",
+    "stale_temp_files",
+    "remove_abandoned_staging",
+    "TEMP_SUFFIX",
+]
 
 TEMP_SUFFIX = ".tmp"
+# A staging directory without its lock file is a killed run's after this long.
+_ORPHAN_STAGING_S = 3600.0
 
 
 class ObjectLock:
@@ -173,3 +184,24 @@ def stale_temp_files(directory: Path, final_name: str) -> list[Path]:
     except FileNotFoundError:
         return []
     return [directory / name for name in names if name.startswith(prefix) and name.endswith(TEMP_SUFFIX)]
+
+
+def remove_abandoned_staging(root: Path) -> None:
+    """Remove the staging directories under `root` of runs that have ended or were killed: each
+    run holds the lock on ``<name>.lock`` beside its directory ``<name>`` while it lives."""
+    for entry in os.scandir(root):
+        if entry.name.endswith(".lock"):
+            lock = ObjectLock(Path(entry.path), timeout_s=0)
+            if lock.acquire(blocking=False):  # its run has ended (or was killed)
+                try:
+                    shutil.rmtree(root / entry.name.removesuffix(".lock"), ignore_errors=True)
+                    Path(entry.path).unlink(missing_ok=True)
+                finally:
+                    lock.release()
+        elif entry.is_dir() and not (root / f"{entry.name}.lock").exists():
+            try:  # its run may be removing it right now, or may be about to lock it
+                abandoned = time.time() - entry.stat().st_mtime > _ORPHAN_STAGING_S
+            except FileNotFoundError:
+                continue
+            if abandoned:
+                shutil.rmtree(entry.path, ignore_errors=True)

@@ -29,7 +29,7 @@ from rsodb.archive.index import CatalogIndex, ObjectState, PassQuery
 from rsodb.archive.ingest_report import CommitEvent, IngestReport, PendingFile
 from rsodb.archive.ingestion import run_ingest
 from rsodb.archive.integrity import DamagedObjectError, check_result, open_object
-from rsodb.archive.locking import ObjectLock, replacing, stale_temp_files
+from rsodb.archive.locking import ObjectLock, remove_abandoned_staging, replacing, stale_temp_files
 from rsodb.archive.stored import ArchivedObject, DamagedObject, PassSummary, ResultSummary, StoredPass
 
 __all__ = ["Archive", "UnknownPassError", "ElementsReport"]
@@ -134,6 +134,9 @@ class Archive:
 
     def _remove_stale_temp_files(self) -> None:
         """Delete temporary files of killed writers; objects being written right now are skipped."""
+        staging = self.path / layout.STAGING_DIR
+        if staging.is_dir():
+            remove_abandoned_staging(staging)
         norads = {int(match.group(1)) for match in map(_TEMP_NAME.match, os.listdir(self.objects_dir)) if match}
         for norad in sorted(norads):
             lock = self.object_lock(norad)
@@ -574,15 +577,18 @@ class Archive:
         events, failures = [], []
         with self._transaction() as transaction:
             for norad in sorted(batches):
+                files = batches[norad]
                 try:
                     transaction.lock(norad)
-                    event = stage_files(transaction, norad, batches[norad])
+                    if len(files) == 1 and files[0].prepared is not None and transaction.adopt(files[0].prepared):
+                        continue  # staged by the reader from the object file as it still is
+                    event = stage_files(transaction, norad, files)
                 except (DamagedObjectError, layout.DamagedPassError, TimeoutError, OSError, ValueError) as exc:
                     if isinstance(exc, layout.DamagedPassError):
                         exc = DamagedObjectError(self.object_path(norad), str(exc))
                     failures.append((norad, exc))
                     continue
-                if not any(item.norad == norad for item in transaction.staged):
+                if not transaction.staged or transaction.staged[-1].norad != norad:  # nothing to write
                     events.append(event)
             for staged in transaction.publish():
                 events.append(staged.event)
