@@ -6,6 +6,7 @@ import base64
 import io
 import json
 import re
+import shutil
 
 import matplotlib
 
@@ -15,12 +16,12 @@ import numpy as np
 import pytest
 
 from rsodb.archive import Archive
-from rsodb.campaign.period_survey import load_period_results, survey_periods
+from rsodb.campaign.period_survey import input_sha256, load_period_results, survey_periods
 from rsodb.cli import main
 from rsodb.cli.report import REPORT_KINDS
 from rsodb.fit.priors import Uniform
 from rsodb.periods.lightcurve import LightCurve
-from rsodb.periods.search import PeriodResult
+from rsodb.periods.search import PeriodResult, PeriodSettings
 from rsodb.periods.trend import fit_period_trend, group_epochs, trend_from_results
 from rsodb.report.html import Document, Figure, Heading, Paragraph, Table
 from rsodb.report.period_report import build_period_report, pass_figure, trend_figure
@@ -70,7 +71,10 @@ def test_stored_pass_chain_and_prior_from_the_archive(surveyed):
 
 def test_cli_table_output_and_errors(surveyed, capsys):
     assert (
-        main(["periods", "--archive", str(surveyed), "--object", "44517", "--processes", "1", "--no-store", "--quiet"])
+        main(
+            ["periods", "--archive", str(surveyed), "--object", "44517", "--processes", "1", "--no-store", "--quiet"]
+            + ["--force"]
+        )
         == 0
     )
     out = capsys.readouterr().out
@@ -84,6 +88,28 @@ def test_cli_table_output_and_errors(surveyed, capsys):
     with pytest.raises(SystemExit):
         main(["periods", "--help"])
     assert "rsodb periods --archive archive --object 22076" in capsys.readouterr().out
+
+
+def test_a_survey_searches_only_passes_whose_inputs_changed(surveyed, tmp_path, capsys):
+    path = tmp_path / "archive"
+    shutil.copytree(surveyed, path)
+    archive = Archive(path, create=False)
+    ids = [row.pass_id for row in archive.summaries(norad=51511)]
+    stored = {r.pass_id: r.to_dict() for r in load_period_results(archive, norad=51511)}
+    # The fixture's survey used the same settings: nothing is searched, the stored results come back.
+    again = survey_periods(archive, 51511, processes=1, progress=False)
+    assert sorted(again.reused) == sorted(ids) and {r.pass_id: r.to_dict() for r in again.results} == stored
+    # Other settings, no geometry, or force: searched again (and stored, replacing the old ones).
+    for changes in ({"settings": PeriodSettings(min_cycles=2.0)}, {"geometry": False}, {"force": True}):
+        survey = survey_periods(archive, 51511, processes=1, progress=False, **changes)
+        assert survey.reused == () and len(survey.results) == len(ids), changes
+    # What was stored last (found without --force from the default settings and geometry) is reused.
+    assert sorted(survey_periods(archive, 51511, processes=1, progress=False).reused) == sorted(ids)
+    assert main(["periods", "--archive", str(path), "--object", "51511", "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert f"{len(ids)} pass(es) not searched again" in out and "stored 2 result(s)" not in out
+    # The inputs' hash follows the pass's content: other data, other hash.
+    assert input_sha256("a" * 64, PeriodSettings(), True) != input_sha256("b" * 64, PeriodSettings(), True)
 
 
 def test_report_command_writes_a_self_contained_page(surveyed, tmp_path, capsys):

@@ -31,6 +31,7 @@ from rsodb.archive.ingestion import run_ingest
 from rsodb.archive.integrity import DamagedObjectError, check_result, open_object
 from rsodb.archive.locking import ObjectLock, remove_abandoned_staging, replacing, stale_temp_files
 from rsodb.archive.stored import ArchivedObject, DamagedObject, PassSummary, ResultSummary, StoredPass
+from rsodb.storage import attr_text
 
 __all__ = ["Archive", "UnknownPassError", "ElementsReport"]
 
@@ -436,6 +437,32 @@ class Archive:
         """
         row = self.summary(pass_id)
         return self._read_passes(row.norad, {row.pass_id})[0]
+
+    def content_hashes(self, norad: int) -> dict[str, str]:
+        """The content SHA-256 of each stored pass version of an object (its samples, row problems
+        and metadata, orbital elements included): what a result derived from a pass was found from.
+
+        Raises
+        ------
+        DamagedObjectError
+        """
+        path = self.object_path(norad)
+        try:
+            with open_object(path) as file:
+                return {
+                    pass_id: attr_text(attrs["content_sha256"])
+                    for pass_id, attrs in (
+                        (pass_id, layout.get_attrs(group, ("content_sha256",)))
+                        for pass_id, group in file["passes"].items()
+                    )
+                    if "content_sha256" in attrs
+                }
+        except FileNotFoundError:
+            return {}
+        except (KeyError, OSError, RuntimeError) as exc:
+            if isinstance(exc, DamagedObjectError):
+                raise
+            raise DamagedObjectError(path, f"its passes cannot be listed ({str(exc).splitlines()[0]})") from None
 
     def results(self, pass_id: str) -> list[ResultSummary]:
         """Summaries (period, verdict, when) of every result stored for a pass."""

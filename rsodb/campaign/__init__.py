@@ -4,22 +4,14 @@ ladders.
 See docs/periods.md (survey), docs/fitting.md (campaigns) and docs/real_passes.md (ladders).
 """
 
-from rsodb.campaign.fit_campaign import CampaignOutcome, run_campaign, run_campaigns, select_passes
-from rsodb.campaign.ladder import LadderPlan, LadderResult, LadderSettings, Rung, run_ladder, score_ladder
-from rsodb.campaign.period_survey import PeriodSurvey, load_period_results, survey_periods
+import lazy_loader
 
-__all__ = [
-    "CampaignOutcome",
-    "run_campaign",
-    "run_campaigns",
-    "select_passes",
-    "LadderPlan",
-    "LadderResult",
-    "LadderSettings",
-    "Rung",
-    "run_ladder",
-    "score_ladder",
-    "PeriodSurvey",
-    "load_period_results",
-    "survey_periods",
-]
+# Loaded on first use: the period survey must not import the fitting machinery.
+__getattr__, __dir__, __all__ = lazy_loader.attach(
+    __name__,
+    submod_attrs={
+        "fit_campaign": ["CampaignOutcome", "run_campaign", "run_campaigns", "select_passes"],
+        "ladder": ["LadderPlan", "LadderResult", "LadderSettings", "Rung", "run_ladder", "score_ladder"],
+        "period_survey": ["PeriodSurvey", "load_period_results", "survey_periods"],
+    },
+)

@@ -20,7 +20,10 @@ examples:
 Each pass gets a period with a 1-sigma error and a verdict: confident, ambiguous harmonic,
 aliased, non-periodic, single glint, too short (fewer than 3 cycles in the pass) or no signal
 (docs/periods.md). Results are stored in the archive under --name and feed 'rsodb report
-periods' and the spin-period prior of fits (confident and ambiguous harmonic only).
+periods' and the spin-period prior of fits (confident and ambiguous harmonic only). A pass whose
+result under --name was found from the same data, orbital elements and settings is not searched
+again (its stored result is shown): after a night's ingest only the new passes are searched.
+--force searches every pass.
 """
 
 
@@ -46,6 +49,9 @@ def register(subparsers) -> None:
     parser.add_argument("--no-store", action="store_true", help="print only; leave the archive unchanged")
     parser.add_argument(
         "--no-geometry", action="store_true", help="skip the pass geometry (no sidereal period, faster)"
+    )
+    parser.add_argument(
+        "--force", action="store_true", help="search passes whose stored result has the same inputs again"
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(func=run)
@@ -93,6 +99,7 @@ def run(args: argparse.Namespace) -> int:
             progress=not args.quiet and not args.json,
             store=not args.no_store,
             geometry=not args.no_geometry,
+            force=args.force,
         )
         damaged = archive.damaged(args.object)
     except (ValueError, TypeError, OSError) as error:
@@ -108,8 +115,14 @@ def run(args: argparse.Namespace) -> int:
             print(_row(result))
         for pass_id, error in survey.failures:
             print(f"{pass_id:40s} failed: {error}")
-        if survey.stored_as:
-            print(f"stored {len(survey.results)} result(s) as '{survey.stored_as}'")
+        searched = len(survey.results) - len(survey.reused)
+        if survey.stored_as and searched:
+            print(f"stored {searched} result(s) as '{survey.stored_as}'")
+        if survey.reused:
+            print(
+                f"{len(survey.reused)} pass(es) not searched again: their stored result '{args.name}' was found "
+                "from the same data and settings (--force searches them)"
+            )
     for item in damaged:
         print(
             f"rsodb periods: warning: {item.path} is damaged ({item.reason}); its passes were not searched. "

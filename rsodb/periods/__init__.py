@@ -7,39 +7,20 @@ the period search with its verdicts, flashes, synodic-to-sidereal correction and
 See docs/periods.md.
 """
 
-from rsodb.periods.analysis import analyse_pass
-from rsodb.periods.lightcurve import FoldedLightCurve, LightCurve
-from rsodb.periods.periodogram import Periodogram, periodogram
-from rsodb.periods.power import PowerSpectrum, power_spectrum
-from rsodb.periods.search import (
-    DEFAULT_RESULT_NAME,
-    VERDICTS,
-    Candidate,
-    PeriodResult,
-    PeriodSettings,
-    find_period,
-)
-from rsodb.periods.synodic import SynodicCorrection
-from rsodb.periods.trend import Epoch, PeriodTrend, SpinTrend, fit_period_trend, trend_from_results
+import lazy_loader
 
-__all__ = [
-    "analyse_pass",
-    "FoldedLightCurve",
-    "LightCurve",
-    "Periodogram",
-    "periodogram",
-    "PowerSpectrum",
-    "power_spectrum",
-    "DEFAULT_RESULT_NAME",
-    "VERDICTS",
-    "Candidate",
-    "PeriodResult",
-    "PeriodSettings",
-    "find_period",
-    "SynodicCorrection",
-    "Epoch",
-    "PeriodTrend",
-    "SpinTrend",
-    "fit_period_trend",
-    "trend_from_results",
-]
+# Loaded on first use: reading stored results (rsodb.periods.result) must not pay for the
+# search's astropy and scipy.
+__getattr__, __dir__, __all__ = lazy_loader.attach(
+    __name__,
+    submod_attrs={
+        "analysis": ["analyse_pass"],
+        "lightcurve": ["FoldedLightCurve", "LightCurve"],
+        "periodogram": ["Periodogram", "periodogram"],
+        "power": ["PowerSpectrum", "power_spectrum"],
+        "result": ["DEFAULT_RESULT_NAME", "VERDICTS", "Candidate", "PeriodResult", "PeriodSettings"],
+        "search": ["find_period"],
+        "synodic": ["SynodicCorrection"],
+        "trend": ["Epoch", "PeriodTrend", "SpinTrend", "fit_period_trend", "trend_from_results"],
+    },
+)

@@ -35,7 +35,6 @@ import math
 
 import numpy as np
 from numpy.polynomial import legendre
-from scipy.special import spherical_jn
 
 __all__ = [
     "DEFAULT_ERROR_FLOOR_MAG",
@@ -483,6 +482,8 @@ def trend_absorption(n_cycles, degree: int):
     >>> round(float(trend_absorption(1.0, 3)), 3), round(float(trend_absorption(3.0, 3)), 3)
     (0.991, 0.176)
     """
+    from scipy.special import spherical_jn  # heavy: reading stored results imports this module
+
     a = math.pi * np.asarray(n_cycles, dtype=float)[..., None]  # (..., 1)
     phase = np.linspace(0.0, math.pi, 64, endpoint=False)
     order = np.arange(1, int(degree) + 1)
