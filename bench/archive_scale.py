@@ -10,7 +10,8 @@ passes per object) the same way. Every command is timed as a whole process (star
 the big and the small archive in turn, and the median of the repeats is quoted with the ratio of
 medians. Measured:
 
-* ``rsodb ls --norad N``, ``rsodb show PASS``, ``rsodb periods --object N`` (one object);
+* ``rsodb ls --norad N``, ``rsodb show PASS``, ``rsodb periods --object N`` (one object, its
+  stored survey reported) and ``rsodb periods --object N --force`` (searched again);
 * a survey query over all passes (``Archive.catalog(period_min=, period_max=, verdict=)`` in a
   process that has opened the archive, and ``rsodb ls --period-min ... --json`` as a command);
 * how long ``rsodb ls`` of everything takes to print its first row, and all of them;
@@ -195,6 +196,8 @@ def run(n_objects: int, n_passes: int, ingest_files: int, repeats: int, director
     # Query commands, big and small in turn.
     targets = {"big": targets_of(big), "small": targets_of(small)}
     paths = {"big": big, "small": small}
+    for which, (norad, _) in targets.items():  # the survey of the object, stored once (not timed)
+        wall_s(rsodb("periods", "--archive", str(paths[which]), "--object", norad, "--quiet"))
     for repeat in range(repeats):
         for which in ("big", "small"):
             norad, pass_id = targets[which]
@@ -207,6 +210,11 @@ def run(n_objects: int, n_passes: int, ingest_files: int, repeats: int, director
                 "rsodb periods --object N",
                 which,
                 wall_s(rsodb("periods", "--archive", archive, "--object", norad, "--quiet")),
+            )
+            add(
+                "rsodb periods --object N --force",
+                which,
+                wall_s(rsodb("periods", "--archive", archive, "--object", norad, "--quiet", "--force")),
             )
             survey = ["--period-min", str(SURVEY["period_min"]), "--period-max", str(SURVEY["period_max"])]
             add(
@@ -282,6 +290,7 @@ def report(result: dict) -> str:
         "rsodb ls --norad N": "<= 0.5 s, <= 1.5x",
         "rsodb show PASS": "<= 0.5 s, <= 1.5x",
         "rsodb periods --object N": "<= 0.5 s, <= 1.5x",
+        "rsodb periods --object N --force": "<= 1.5x",
         "Archive.catalog(survey filters), opened": "<= 1 s",
         "rsodb ls (survey filters) --json": "<= 1 s",
         "rsodb ls: first row": "<= 1 s",
@@ -295,6 +304,10 @@ def report(result: dict) -> str:
             f"{target.get(name, '')} |"
         )
     lines += [
+        "",
+        "`rsodb periods --object N` reports the object's stored results, found from the same inputs "
+        "(the survey is run once, untimed, before the repeats); with `--force` it searches every pass "
+        "of the object again (the search's imports and work, the same on both archives).",
         "",
         "The 'archive side' rows time, in a process that has opened the archive, what the archive does "
         "for `ls --norad`, `show` and `periods --object` (reading the object's passes and storing a result "
@@ -320,11 +333,15 @@ def headline_figures(result: dict) -> list[dict]:
             f">= {TARGETS['ingest_files_per_s']:.0f} files/s",
         )
     ]
-    for name in ("rsodb ls --norad N", "rsodb show PASS", "rsodb periods --object N"):
+    for name in (
+        "rsodb ls --norad N",
+        "rsodb show PASS",
+        "rsodb periods --object N",
+        "rsodb periods --object N --force",
+    ):
         pair = med[name]
-        figures.append(
-            figure(name, f"{pair['big']:.2f} s ({pair['big'] / pair['small']:.2f}x 10 objects)", "<= 0.5 s, <= 1.5x")
-        )
+        target = "<= 1.5x" if name.endswith("--force") else "<= 0.5 s, <= 1.5x"
+        figures.append(figure(name, f"{pair['big']:.2f} s ({pair['big'] / pair['small']:.2f}x 10 objects)", target))
     figures.append(
         figure(
             "survey query over all passes", f"{med['Archive.catalog(survey filters), opened']['big']:.3f} s", "<= 1 s"
