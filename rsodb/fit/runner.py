@@ -29,7 +29,7 @@ from rsodb.fit.sampler import run_sampler
 from rsodb.fit.selection import Selection, select_samples
 from rsodb.fit.shape_store import ShapeStore
 from rsodb.fit.shapes import MATERIAL_PARAMETERS, Shape, brightness_for, resolve_shape
-from rsodb.periods.search import PeriodResult
+from rsodb.periods.result import PeriodResult
 
 __all__ = [
     "FitProblem",

@@ -56,31 +56,19 @@ from rsodb.periods.noise import (
 )
 from rsodb.periods.power import power_spectrum
 from rsodb.periods.result import (
-    DEFAULT_RESULT_NAME,
-    METHOD,
-    READABLE_SCHEMAS,
-    SCHEMA,
     Candidate,
     PeriodResult,
     PeriodSettings,
 )
 from rsodb.periods.synodic import SynodicCorrection
-from rsodb.periods.verdicts import VERDICTS, Evidence, judge
+from rsodb.periods.verdicts import Evidence, judge
 
 if TYPE_CHECKING:
     from rsodb.periods.lightcurve import LightCurve
 
-__all__ = [
-    "find_period",
-    "PeriodSettings",
-    "PeriodResult",
-    "Candidate",
-    "VERDICTS",
-    "METHOD",
-    "SCHEMA",
-    "READABLE_SCHEMAS",
-    "DEFAULT_RESULT_NAME",
-]
+# The result, its settings and candidates live in rsodb.periods.result (reading stored results
+# needs no search); they are imported here for the search and for older imports.
+__all__ = ["find_period", "PeriodSettings", "PeriodResult"]
 
 # Fewer samples than this cannot fit a trend and a few harmonics with any redundancy.
 MIN_POINTS = 20

@@ -6,7 +6,7 @@ import html
 import math
 
 from rsodb.fit.result import FitResult
-from rsodb.periods.search import PeriodResult
+from rsodb.periods.result import PeriodResult
 from rsodb.report.html import Document, Link, Paragraph, Raw, Table, anchor
 from rsodb.report.spin_state import axis_text, convention_interval, interval
 from rsodb.report.trust import assess
