@@ -317,3 +317,20 @@ def test_a_reader_that_stops_early_gets_no_traceback(stored, command):
     script = f"{rsodb} {verb} --archive {archive.path} {rest}"
     done = subprocess.run(["bash", "-c", script], capture_output=True, text=True, cwd=PROJECT_ROOT, timeout=120)
     assert done.stdout and "Traceback" not in done.stderr and "Exception" not in done.stderr, done.stderr
+
+
+@pytest.mark.parametrize(
+    ("argv", "named"),
+    [
+        (["ingest", "{sample}", "--tle", "{missing}"], "--tle {missing}"),
+        (["ingest", "{sample}", "--tle", "{directory}"], "--tle {directory}"),
+        (["elements", "add", "{missing}"], "the catalogue {missing}"),
+    ],
+)
+def test_an_unreadable_element_catalogue_is_named_with_its_option(tmp_path, shared_data, capsys, argv, named):
+    # A missing --tle file gave a bare "[Errno 2] ..." without saying which input it was.
+    places = {"sample": str(TOPEX_PHV), "missing": str(tmp_path / "tles.txt"), "directory": str(tmp_path)}
+    argv = [item.format(**places) for item in argv] + ["--archive", str(tmp_path / "archive")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and named.format(**places) in err and "cannot read the element catalogue" in err

@@ -18,6 +18,7 @@ __all__ = [
     "add_dask_options",
     "workers_of",
     "max_age_days",
+    "read_catalogue",
     "open_archive",
     "archive_location",
     "fail",
@@ -67,6 +68,15 @@ def add_max_age_option(parser: argparse.ArgumentParser) -> None:
 def max_age_days(args: argparse.Namespace) -> float:
     """``--max-age-days``, or the library's default (`ingest.elements.DEFAULT_MAX_AGE_DAYS`)."""
     return ingest.DEFAULT_MAX_AGE_DAYS if args.max_age_days is None else args.max_age_days
+
+
+def read_catalogue(path: str, what: str):
+    """The element catalogue in `path` (`ingest.ElementCatalogue`); a file that cannot be read is a
+    one-line error naming `what` gave it (an option or argument) and the file."""
+    try:
+        return ingest.ElementCatalogue.from_file(path)
+    except OSError as exc:
+        raise ValueError(f"{what} {path}: cannot read the element catalogue ({exc.strerror or exc})") from None
 
 
 def archive_location(args: argparse.Namespace) -> tuple[str, str]:

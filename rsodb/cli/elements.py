@@ -5,8 +5,14 @@ from __future__ import annotations
 import argparse
 import json
 
-import ingest
-from rsodb.cli.archive_options import add_archive_option, add_max_age_option, fail, max_age_days, open_archive
+from rsodb.cli.archive_options import (
+    add_archive_option,
+    add_max_age_option,
+    fail,
+    max_age_days,
+    open_archive,
+    read_catalogue,
+)
 
 __all__ = ["register", "run_add"]
 
@@ -52,7 +58,7 @@ def register(subparsers) -> None:
 
 def run_add(args: argparse.Namespace) -> int:
     try:
-        catalogue = ingest.ElementCatalogue.from_file(args.catalogue)
+        catalogue = read_catalogue(args.catalogue, "the catalogue")
         archive = open_archive(args)
         report = archive.add_elements(
             catalogue,

@@ -6,9 +6,15 @@ import argparse
 import json
 import sys
 
-import ingest
 import rsodb
-from rsodb.cli.archive_options import add_archive_option, add_max_age_option, fail, max_age_days, open_archive
+from rsodb.cli.archive_options import (
+    add_archive_option,
+    add_max_age_option,
+    fail,
+    max_age_days,
+    open_archive,
+    read_catalogue,
+)
 
 __all__ = ["register", "run"]
 
@@ -63,7 +69,7 @@ def register(subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     try:
         workers = _workers(args.workers)
-        catalogue = ingest.ElementCatalogue.from_file(args.tle) if args.tle else None
+        catalogue = read_catalogue(args.tle, "--tle") if args.tle else None
         archive = open_archive(args, create=True)
         report = archive.ingest(
             args.paths,
