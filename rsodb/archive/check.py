@@ -16,8 +16,6 @@ from pathlib import Path
 import re
 from typing import TYPE_CHECKING
 
-from tqdm import tqdm
-
 from rsodb.archive import layout
 from rsodb.archive.integrity import verify_object
 
@@ -100,6 +98,8 @@ def check_archive(archive: Archive, repair: bool = False, progress: bool = False
         for entry in os.listdir(archive.objects_dir)
         if (match := _OBJECT_NAME.match(entry)) is not None
     )
+    from tqdm import tqdm  # only a check shows progress; lookups import this module (~30 ms)
+
     for norad, name in tqdm(names, disable=not progress, unit="object", desc="check"):
         path = archive.objects_dir / name
         report.n_objects += 1

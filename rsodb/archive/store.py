@@ -27,7 +27,6 @@ from rsodb.archive import layout
 from rsodb.archive.commits import ObjectTransaction, stage_files, stage_metadata, stage_results, utc_now
 from rsodb.archive.index import CatalogIndex, ObjectState, PassQuery
 from rsodb.archive.ingest_report import CommitEvent, IngestReport, PendingFile
-from rsodb.archive.ingestion import run_ingest
 from rsodb.archive.integrity import DamagedObjectError, check_result, open_object
 from rsodb.archive.locking import ObjectLock, remove_abandoned_staging, replacing, stale_temp_files
 from rsodb.archive.stored import ArchivedObject, DamagedObject, PassSummary, ResultSummary, StoredPass
@@ -536,6 +535,9 @@ class Archive:
             paths = [paths]
         if elements is not None and not isinstance(elements, ElementCatalogue):
             elements = ElementCatalogue.from_file(elements)
+        # Imported here: the readers and the progress bar cost lookups (ls, show) ~50 ms of start-up.
+        from rsodb.archive.ingestion import run_ingest
+
         return run_ingest(
             self,
             list(paths),
