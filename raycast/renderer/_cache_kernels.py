@@ -219,6 +219,7 @@ def lit_classes(
     count = 0
     zero, one = np.uint64(0), np.uint64(1)
     pair = 0
+    run_group, run_area = 0, 0.0
     for f in range(m):
         s0, s1, s2, s3 = sun_nodes[f, 0], sun_nodes[f, 1], sun_nodes[f, 2], sun_nodes[f, 3]
         o0, o1, o2, o3 = obs_nodes[f, 0], obs_nodes[f, 1], obs_nodes[f, 2], obs_nodes[f, 3]
@@ -237,8 +238,17 @@ def lit_classes(
             while both != zero:
                 e = base + _lowest_bit(both)
                 both &= both - one
+                # Elements come in group order: a run of one group's pieces is summed in a
+                # register (adding each to memory waits on the previous add to the same group).
                 for k in range(ptr[e], ptr[e + 1]):
-                    weight[group[k]] += area[k]
+                    if group[k] == run_group:
+                        run_area += area[k]
+                    else:
+                        weight[run_group] += run_area
+                        run_group, run_area = group[k], area[k]
+        if run_area != 0.0:
+            weight[run_group] += run_area
+        run_group, run_area = 0, 0.0
         while pair < len(pair_frames) and pair_frames[pair] == f:
             value = pair_open[pair]
             if value != 0.0:
