@@ -166,6 +166,32 @@ def test_ggx_tables_reproduce_cycles_integrals():
     assert ggx_tables.dielectric_fresnel_mean(8 / 15, 8 / 15, eta) == pytest.approx(0.034703, abs=1e-4)
 
 
+def test_ggx_table_nodes_are_kept_on_disk_and_read_back(tmp_path, monkeypatch):
+    monkeypatch.setenv("RSODB_CACHE_DIR", str(tmp_path))
+    stored = ggx_tables._s_column.__wrapped__  # the disk layer, without this process's memory
+    quadrature = stored.__wrapped__
+    first = stored(3, 4)
+    files = list(tmp_path.glob("ggx_tables/*/s_column-3-4.npy"))
+    assert len(files) == 1
+    # Read back bit for bit, and equal to the quadrature itself.
+    np.testing.assert_array_equal(stored(3, 4), first)
+    np.testing.assert_array_equal(first, quadrature(3, 4))
+    # The directory is named by the module source's hash: a changed quadrature computes anew.
+    assert files[0].parent.name == ggx_tables._table_dir().name
+
+
+def test_mixed_table_nodes_interpolate_as_the_separate_nodes():
+    """Mixing the roughness (and z) nodes once per material equals interpolating each node's
+    column over mu and mixing the results (interpolation is linear in the node values)."""
+    mu = np.linspace(-0.1, 1.1, 57)
+    for roughness in (0.3, 0.5, 16 / 31):
+        low, high, t = ggx_tables._position(roughness, 32)
+        separate = (1 - t) * ggx_tables._interpolate_mu(ggx_tables._e_column(int(low)), mu) + t * (
+            ggx_tables._interpolate_mu(ggx_tables._e_column(int(high)), mu)
+        )
+        np.testing.assert_allclose(ggx_tables.ggx_albedo(roughness, mu), separate, rtol=1e-12, atol=1e-15)
+
+
 def test_valid_reflection_normal_lifts_the_mirror_direction_to_the_threshold():
     rng = np.random.default_rng(11)
     m = 400

@@ -1,6 +1,7 @@
-"""The fast path's compiled bit loops against the same sums written out in numpy."""
+"""The fast path's compiled loops against the same sums written out in numpy."""
 
 import numpy as np
+import pytest
 from scipy import sparse
 
 from raycast.renderer import _cache_kernels
@@ -40,32 +41,17 @@ def _numpy_reference(bits, sun_nodes, obs_nodes, sun, obs, normals, area):
     return out, frames, elements, need
 
 
-def _run(case):
-    """(m, g) agreed area and the mixed pairs, from the compiled loop."""
-    bits, sun_nodes, obs_nodes, sun, obs, normals, area = case
-    out = np.zeros((len(sun), area.shape[0]), dtype=np.float32)
-    pairs = _cache_kernels.agreed_weight(
-        out,
-        _cache_kernels.pack_words(bits),
-        sun_nodes,
-        obs_nodes,
-        sun,
-        obs,
-        normals,
-        area.indptr,
-        area.indices,
-        area.data,
-    )
-    return (out, *pairs)
+def _pairs(case):
+    bits, sun_nodes, obs_nodes, sun, obs, normals, _ = case
+    return _cache_kernels.mixed_pairs(_cache_kernels.pack_words(bits), sun_nodes, obs_nodes, sun, obs, normals)
 
 
-def test_agreed_area_and_mixed_pairs_match_numpy():
+def test_mixed_pairs_match_numpy():
     # 130 elements: three words, the last one partly filled (its padding bits must stay clear).
     case = _case(1, n_elements=130, n_frames=25)
-    out, frames, elements, need = _run(case)
-    ref_out, ref_frames, ref_elements, ref_need = _numpy_reference(*case)
-    np.testing.assert_allclose(out, ref_out, rtol=1e-5)
-    assert out.sum() > 0.0
+    frames, elements, need = _pairs(case)
+    _, ref_frames, ref_elements, ref_need = _numpy_reference(*case)
+    assert np.all(np.diff(frames) >= 0)  # in frame order, as lit_classes reads them
     order = np.lexsort((elements, frames))
     np.testing.assert_array_equal(frames[order], ref_frames)
     np.testing.assert_array_equal(elements[order], ref_elements)
@@ -73,30 +59,85 @@ def test_agreed_area_and_mixed_pairs_match_numpy():
     assert set(np.unique(need)) == {1, 2, 3}
 
 
-def test_mixed_pairs_beyond_the_first_guess_are_all_returned_and_nothing_added_twice():
+def test_mixed_pairs_beyond_the_first_guess_are_all_returned():
     # Dense half-set bits: far more mixed pairs than the first guess (4096) holds.
     case = _case(2, n_elements=1000, n_frames=60, density=0.5)
-    out, frames, elements, _ = _run(case)
-    ref_out, ref_frames, ref_elements, _ = _numpy_reference(*case)
+    frames, elements, _ = _pairs(case)
+    _, ref_frames, ref_elements, _ = _numpy_reference(*case)
     assert len(ref_frames) > 4096
     order = np.lexsort((elements, frames))
     np.testing.assert_array_equal(frames[order], ref_frames)
     np.testing.assert_array_equal(elements[order], ref_elements)
-    np.testing.assert_allclose(out, ref_out, rtol=1e-5)
 
 
-def test_pairs_add_their_value_times_area_to_each_group():
-    case = _case(3, n_elements=70, n_frames=5)
-    area = case[-1]
-    out = np.zeros((5, area.shape[0]), dtype=np.float32)
-    frames, elements = np.array([0, 0, 4]), np.array([3, 69, 3])
-    values = np.array([0.5, 1.0, 0.25], dtype=np.float32)
-    _cache_kernels.add_pairs(out, frames, elements, values, area.indptr, area.indices, area.data)
-    dense = area.toarray()
-    expected = np.zeros_like(out)
-    for f, e, v in zip(frames, elements, values):
-        expected[f] += v * dense[:, e]
-    np.testing.assert_allclose(out, expected, rtol=1e-6)
+def _unit(a):
+    return (a / np.linalg.norm(a, axis=1, keepdims=True)).astype(np.float32)
+
+
+@pytest.mark.parametrize("n_extra", [0, 3])
+def test_lit_classes_sum_gated_group_areas_into_sorted_classes(n_extra):
+    """Agreed bits, the mixed pairs' open fractions, exposed areas and factorised weights, gated
+    by each group's geometric normal and summed into its class, against the same in numpy."""
+    case = _case(5, n_elements=130, n_frames=25)
+    bits, sun_nodes, obs_nodes, _, _, normals, area = case
+    rng = np.random.default_rng(6)
+    m, n_groups, n_classes = len(sun_nodes), area.shape[0], 4
+    sun, obs = _unit(rng.normal(size=(m, 3))), _unit(rng.normal(size=(m, 3)))
+    # Normals in the xy plane and every third Sun close to it: groups lit by part of the disk.
+    sun[::3] = _unit(np.c_[2e-3 * rng.normal(size=(len(sun[::3]), 2)), np.ones(len(sun[::3]))])
+    normal_geo = _unit(np.c_[rng.normal(size=(n_groups, 2)), np.zeros(n_groups)])
+    normal_shade = _unit(normal_geo + 0.3 * rng.normal(size=(n_groups, 3)))
+    group_class = np.sort(rng.integers(0, n_classes, n_groups)).astype(np.int32)
+    area_exposed = np.where(rng.random(n_groups) < 0.5, rng.random(n_groups), 0.0).astype(np.float32)
+    extra_groups = rng.choice(n_groups, n_extra, replace=False).astype(np.int64)
+    extra = rng.random((m, n_extra)).astype(np.float32)
+    frames, elements, need = _cache_kernels.mixed_pairs(
+        _cache_kernels.pack_words(bits), sun_nodes, obs_nodes, sun, obs, normals
+    )
+    open_ = rng.choice([0.0, 0.5, 1.0], len(frames)).astype(np.float32)
+    out = _cache_kernels.lit_classes(
+        _cache_kernels.pack_words(bits),
+        sun_nodes,
+        obs_nodes,
+        area.indptr,
+        area.indices,
+        area.data,
+        frames,
+        elements,
+        open_,
+        area_exposed,
+        extra,
+        extra_groups,
+        normal_geo,
+        normal_shade,
+        group_class,
+        sun,
+        obs,
+        n_classes,
+    )
+    both = bits[sun_nodes].all(axis=1) & bits[obs_nodes].all(axis=1)  # (m, e)
+    weight = (area @ both.T.astype(np.float64)).T + area_exposed
+    pair_value = np.zeros(both.shape)
+    np.add.at(pair_value, (frames, elements), open_)
+    weight += (area @ pair_value.T).T
+    weight[:, extra_groups] += extra
+    cos_o, cos_s = obs @ normal_geo.T, sun @ normal_geo.T
+    gated = weight * np.where(cos_o > 0, cos_o, 0.0) * sun_fractions(cos_s)  # (m, g)
+    one_hot = np.eye(n_classes)[group_class]  # (g, c)
+    ref_area = gated @ one_hot
+    lit = np.nonzero(ref_area > 0)
+    unit = lambda a: a / np.linalg.norm(a, axis=-1, keepdims=True)
+    ref_normal = unit(np.einsum("mg,gc,gk->mck", gated, one_hot, normal_shade))[lit]
+    ref_geo = unit(np.einsum("mg,gc,gk->mck", gated, one_hot, normal_geo))[lit]
+    got_frames, got_classes, got_area, got_normal, got_geo = out
+    np.testing.assert_array_equal(got_frames, lit[0])
+    np.testing.assert_array_equal(got_classes, lit[1])
+    # float32 inputs summed in float64: agreement to float32 rounding.
+    np.testing.assert_allclose(got_area, ref_area[lit], rtol=1e-5)
+    np.testing.assert_allclose(got_normal, ref_normal, atol=1e-5)
+    np.testing.assert_allclose(got_geo, ref_geo, atol=1e-5)
+    assert 0 < len(got_frames) < m * n_classes
+    assert np.any((sun_fractions(cos_s) > 0) & (sun_fractions(cos_s) < 1))
 
 
 def test_rays_and_open_fractions_follow_the_pairs_needs():
@@ -116,23 +157,3 @@ def test_rays_and_open_fractions_follow_the_pairs_needs():
         np.testing.assert_array_equal(rays[row, 3:], d)
     occluded = np.array([True, False, False, False, False, True, True, True])
     np.testing.assert_allclose(_cache_kernels.open_fraction(need, occluded, 2), [0.5, 0.5, 0.0])
-
-
-def test_class_sums_gate_and_weight_by_the_geometric_normal():
-    rng = np.random.default_rng(4)
-    n_groups, m, n_classes = 30, 12, 5
-    weight = rng.normal(size=(n_groups, m)).astype(np.float32)  # some negative: counted as zero
-    unit = lambda a: (a / np.linalg.norm(a, axis=1, keepdims=True)).astype(np.float32)
-    normal_geo, normal_shade = unit(rng.normal(size=(n_groups, 3))), unit(rng.normal(size=(n_groups, 3)))
-    group_class = rng.integers(0, n_classes, n_groups).astype(np.int32)
-    sun, obs = unit(rng.normal(size=(m, 3))), unit(rng.normal(size=(m, 3)))
-    area, normal, geo = _cache_kernels.class_sums(
-        np.ascontiguousarray(weight.T), normal_geo, normal_shade, group_class, sun, obs, n_classes
-    )
-    cos_o, cos_s = normal_geo @ obs.T, normal_geo @ sun.T
-    gated = np.maximum(weight, 0.0) * np.where(cos_o > 0, cos_o, 0.0) * sun_fractions(cos_s)
-    one_hot = np.eye(n_classes)[group_class].T  # (c, g)
-    np.testing.assert_allclose(area, (one_hot @ gated).T, rtol=1e-5, atol=1e-6)
-    np.testing.assert_allclose(normal, np.einsum("cg,gm,gk->mck", one_hot, gated, normal_shade), rtol=1e-5, atol=1e-6)
-    np.testing.assert_allclose(geo, np.einsum("cg,gm,gk->mck", one_hot, gated, normal_geo), rtol=1e-5, atol=1e-6)
-    assert (area > 0).sum() > 5

@@ -1,14 +1,17 @@
 """Compiled (numba) loops of the fast path (raycast.renderer.cache), where numpy needed (elements, frames) arrays.
 
-* Bit-held elements (``raycast.renderer.cache._add_bit_weight``): their visibility bits are held as
-  (directions, words) uint64, element ``e`` at bit ``e % 64`` of word ``e // 64``. For each frame
-  the four cube-map nodes around the Sun and the four around the observer are ANDed (visible at
-  all of them) and ORed (at any) one word at a time; an element's area is added to its groups
-  where all eight agree, and the pairs where they differ are returned for exact rays. Only the
-  set bits are read.
-* Shading classes (:func:`class_sums`): the groups' gated areas, shading and geometric normals
-  summed into their classes in one pass.
+* Bit-held elements: their visibility bits are held as (directions, words) uint64, element ``e``
+  at bit ``e % 64`` of word ``e // 64``. For each frame the four cube-map nodes around the Sun
+  and the four around the observer are ANDed (visible at all of them) and ORed (at any) one
+  word at a time; :func:`mixed_pairs` returns the pairs where the eight differ, for exact rays
+  (:func:`pair_rays`, :func:`open_fraction`). Only the set bits are read.
+* Shading classes (:func:`lit_classes`): one frame at a time, each group's lit-and-seen area
+  (exposed, agreed bits, the mixed pairs' open fractions, factorised visibility), gated by its
+  geometric normal and summed into its class with its normals; only the classes with light
+  are returned, so nothing of size (frames, groups) or (frames, classes) is held.
 """
+
+import math
 
 from numba import njit
 import numpy as np
@@ -101,47 +104,36 @@ def _lowest_bit(word):
     return _DEBRUIJN_INDEX[((word & (~word + np.uint64(1))) * _DEBRUIJN) >> np.uint64(58)]
 
 
-@njit(cache=True, nogil=True)
-def _add_element(out, frame, element, value, ptr, group, area):
-    for k in range(ptr[element], ptr[element + 1]):
-        out[frame, group[k]] += value * area[k]
-
-
-def agreed_weight(out, words, sun_nodes, obs_nodes, sun, obs, normals, ptr, group, area):
-    """Add the area lit and seen at all eight nodes to ``out``; return the pairs to decide by rays.
+def mixed_pairs(words, sun_nodes, obs_nodes, sun, obs, normals):
+    """The (frame, element) pairs whose bits differ among the eight nodes, to decide by rays.
 
     Parameters
     ----------
-    out : (m, g) float32, each group's area per frame, added to.
     words : (d, w) uint64 visibility bits.
     sun_nodes, obs_nodes : (m, 4) int64, the cube-map nodes around each frame's directions.
     sun, obs : (m, 3) float32 exact directions; normals : (e, 3) float32 element normals.
-    ptr, group, area : the elements' (group, area) pairs, CSC-style (element e owns
-        ``ptr[e]:ptr[e + 1]``).
 
     Returns
     -------
-    frames, elements : (p,) int64, pairs visible at some node of both but not at all eight,
-        and facing both exact directions.
+    frames, elements : (p,) int64, in frame order, pairs visible at some node of both but not
+        at all eight, and facing both exact directions.
     need : (p,) uint8, bit 0: the Sun's four nodes differ (cast toward the Sun), bit 1: the
         observer's do.
     """
     # The pairs go to arrays sized from a first guess (a thirty-second of all pairs; 1% is
     # usual); when they overflow, the loop runs again with room for all.
-    capacity, add = max(4096, len(sun_nodes) * len(normals) // 32), True
+    capacity = max(4096, len(sun_nodes) * len(normals) // 32)
     while True:
         frames, elements = np.empty(capacity, dtype=np.int64), np.empty(capacity, dtype=np.int64)
         need = np.empty(capacity, dtype=np.uint8)
-        count = _agreed_weight(
-            out, words, sun_nodes, obs_nodes, sun, obs, normals, ptr, group, area, frames, elements, need, add
-        )
+        count = _mixed_pairs(words, sun_nodes, obs_nodes, sun, obs, normals, frames, elements, need)
         if count <= capacity:
             return frames[:count], elements[:count], need[:count]
-        capacity, add = count, False  # the first run added the agreed area in full
+        capacity = count
 
 
 @njit(cache=True, nogil=True)
-def _agreed_weight(out, words, sun_nodes, obs_nodes, sun, obs, normals, ptr, group, area, frames, elements, need, add):
+def _mixed_pairs(words, sun_nodes, obs_nodes, sun, obs, normals, frames, elements, need):
     # The pair arrays come in full size: growing them inside the loop made it three times slower.
     m, n_words = sun_nodes.shape[0], words.shape[1]
     capacity = len(frames)
@@ -157,13 +149,8 @@ def _agreed_weight(out, words, sun_nodes, obs_nodes, sun, obs, normals, ptr, gro
             sun_all, sun_any = a & b & c & d, a | b | c | d
             a, b, c, d = words[o0, w], words[o1, w], words[o2, w], words[o3, w]
             obs_all, obs_any = a & b & c & d, a | b | c | d
-            both = sun_all & obs_all
-            mixed = sun_any & obs_any & ~both
+            mixed = sun_any & obs_any & ~(sun_all & obs_all)
             base = 64 * w
-            while add and both != zero:
-                bit = _lowest_bit(both)
-                both &= both - one
-                _add_element(out, f, base + bit, np.float32(1.0), ptr, group, area)
             while mixed != zero:
                 bit = _lowest_bit(mixed)
                 mixed &= mixed - one
@@ -181,42 +168,127 @@ def _agreed_weight(out, words, sun_nodes, obs_nodes, sun, obs, normals, ptr, gro
 
 
 @njit(cache=True, nogil=True)
-def add_pairs(out, frames, elements, values, ptr, group, area):
-    """out[frame, group] += value * area for each pair's element pieces."""
-    for i in range(len(frames)):
-        if values[i] != 0.0:
-            _add_element(out, frames[i], elements[i], values[i], ptr, group, area)
+def lit_classes(
+    words,
+    sun_nodes,
+    obs_nodes,
+    ptr,
+    group,
+    area,
+    pair_frames,
+    pair_elements,
+    pair_open,
+    area_exposed,
+    extra_weight,
+    extra_groups,
+    normal_geo,
+    normal_shade,
+    group_class,
+    sun,
+    obs,
+    n_classes,
+):
+    """Each frame's shading classes with light: their lit, seen and projected area and normals.
 
-
-@njit(cache=True, nogil=True)
-def class_sums(weight, normal_geo, normal_shade, group_class, sun, obs, n_classes):
-    """Each shading class's lit, seen and projected area, and its groups' shading normals.
-
-    Parameters
-    ----------
-    weight : (m, g) float32, each group's lit-and-seen area per frame (negative: zero).
-    normal_geo, normal_shade : (g, 3) float32, the groups' geometric and mean shading normals.
-    group_class : (g,) int, each group's shading class.
-    sun, obs : (m, 3) float32.
-    n_classes : int.
+    A group's lit-and-seen area in a frame is its exposed area, plus its bit-held elements'
+    pieces where all eight nodes agree (``words``, ``sun_nodes``, ``obs_nodes``; ``ptr``,
+    ``group``, ``area`` CSC-style as in :func:`mixed_pairs`), plus ``pair_open`` times the
+    pieces of the mixed pairs (``pair_frames`` in frame order, ``pair_elements``), plus
+    ``extra_weight`` (m, k) on ``extra_groups`` (k,) (the factorised groups). It is gated by
+    the group's geometric normal (max(n_geo . obs, 0) and the part of the solar disk above its
+    plane, :func:`raycast.renderer.rays.sun_fraction`) and summed into the group's class with
+    the group's shading and geometric normals. One frame at a time, so no (frames, groups)
+    array is held; ``group_class`` must be sorted (each class's groups in one run).
 
     Returns
     -------
-    area : (m, c) float32, sum of weight x max(n_geo . obs, 0) x the part of the solar disk
-        above the group's plane (:func:`raycast.renderer.rays.sun_fraction`) over the class's
-        groups (the gates of the geometric normal).
-    normal : (m, c, 3) float32, the same sum of each group's shading normal (not normalised).
-    geo : (m, c, 3) float32, and of each group's geometric normal.
+    frames, classes : (k,) int64, the (frame, class) pairs with light, in frame order.
+    area : (k,) float64, the class's gated area.
+    normal, geo : (k, 3) float64, its groups' shading and geometric normals weighted by their
+        gated areas, normalised.
     """
-    m, n_groups = weight.shape
-    area = np.zeros((m, n_classes), dtype=np.float32)
-    normal = np.zeros((m, n_classes, 3), dtype=np.float32)
-    geo = np.zeros((m, n_classes, 3), dtype=np.float32)
+    m, n_words = sun_nodes.shape[0], words.shape[1]
+    n_groups = len(area_exposed)
+    weight = np.zeros(n_groups)
+    capacity = max(1024, 4 * n_classes)
+    out_frames = np.empty(capacity, dtype=np.int64)
+    out_classes = np.empty(capacity, dtype=np.int64)
+    out_area = np.empty(capacity)
+    out_normal = np.empty((capacity, 3))
+    out_geo = np.empty((capacity, 3))
+    count = 0
+    zero, one = np.uint64(0), np.uint64(1)
+    pair = 0
+    run_group, run_area = 0, 0.0
     for f in range(m):
+        s0, s1, s2, s3 = sun_nodes[f, 0], sun_nodes[f, 1], sun_nodes[f, 2], sun_nodes[f, 3]
+        o0, o1, o2, o3 = obs_nodes[f, 0], obs_nodes[f, 1], obs_nodes[f, 2], obs_nodes[f, 3]
+        for w in range(n_words):
+            both = (
+                words[s0, w]
+                & words[s1, w]
+                & words[s2, w]
+                & words[s3, w]
+                & words[o0, w]
+                & words[o1, w]
+                & words[o2, w]
+                & words[o3, w]
+            )
+            base = 64 * w
+            while both != zero:
+                e = base + _lowest_bit(both)
+                both &= both - one
+                # Elements come in group order: a run of one group's pieces is summed in a
+                # register (adding each to memory waits on the previous add to the same group).
+                for k in range(ptr[e], ptr[e + 1]):
+                    if group[k] == run_group:
+                        run_area += area[k]
+                    else:
+                        weight[run_group] += run_area
+                        run_group, run_area = group[k], area[k]
+        if run_area != 0.0:
+            weight[run_group] += run_area
+        run_group, run_area = 0, 0.0
+        while pair < len(pair_frames) and pair_frames[pair] == f:
+            value = pair_open[pair]
+            if value != 0.0:
+                e = pair_elements[pair]
+                for k in range(ptr[e], ptr[e + 1]):
+                    weight[group[k]] += value * area[k]
+            pair += 1
+        for j in range(len(extra_groups)):
+            weight[extra_groups[j]] += extra_weight[f, j]
+        if count + n_classes > capacity:
+            capacity = max(2 * capacity, count + n_classes)
+            out_frames = _grown(out_frames, capacity, count)
+            out_classes = _grown(out_classes, capacity, count)
+            out_area = _grown(out_area, capacity, count)
+            out_normal = _grown(out_normal, capacity, count)
+            out_geo = _grown(out_geo, capacity, count)
         sx, sy, sz = sun[f, 0], sun[f, 1], sun[f, 2]
         ox, oy, oz = obs[f, 0], obs[f, 1], obs[f, 2]
-        for g in range(n_groups):
-            w = weight[f, g]
+        # Groups come sorted by class (SceneCache.build): each class is summed in one run.
+        current = -1
+        total, nx, ny, nz, gx_sum, gy_sum, gz_sum = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+        for g in range(n_groups + 1):
+            c = group_class[g] if g < n_groups else -2
+            if c != current:
+                if total > 0.0:
+                    norm = math.sqrt(nx * nx + ny * ny + nz * nz)
+                    geo_norm = math.sqrt(gx_sum * gx_sum + gy_sum * gy_sum + gz_sum * gz_sum)
+                    out_frames[count], out_classes[count], out_area[count] = f, current, total
+                    out_normal[count, 0], out_normal[count, 1], out_normal[count, 2] = nx / norm, ny / norm, nz / norm
+                    out_geo[count, 0] = gx_sum / geo_norm
+                    out_geo[count, 1] = gy_sum / geo_norm
+                    out_geo[count, 2] = gz_sum / geo_norm
+                    count += 1
+                current = c
+                total, nx, ny, nz, gx_sum, gy_sum, gz_sum = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+            if g == n_groups:
+                break
+            # A lit-and-seen area is never negative; the factors' float32 rounding can make it -1e-7.
+            w = area_exposed[g] + weight[g]
+            weight[g] = 0.0
             if w <= 0.0:
                 continue
             gx, gy, gz = normal_geo[g, 0], normal_geo[g, 1], normal_geo[g, 2]
@@ -225,15 +297,21 @@ def class_sums(weight, normal_geo, normal_shade, group_class, sun, obs, n_classe
             if cos_o <= 0.0 or cos_s <= -SUN_RADIUS_SINE:
                 continue
             w *= cos_o * sun_fraction(cos_s)
-            c = group_class[g]
-            area[f, c] += w
-            normal[f, c, 0] += w * normal_shade[g, 0]
-            normal[f, c, 1] += w * normal_shade[g, 1]
-            normal[f, c, 2] += w * normal_shade[g, 2]
-            geo[f, c, 0] += w * gx
-            geo[f, c, 1] += w * gy
-            geo[f, c, 2] += w * gz
-    return area, normal, geo
+            total += w
+            nx += w * normal_shade[g, 0]
+            ny += w * normal_shade[g, 1]
+            nz += w * normal_shade[g, 2]
+            gx_sum += w * gx
+            gy_sum += w * gy
+            gz_sum += w * gz
+    return out_frames[:count], out_classes[:count], out_area[:count], out_normal[:count], out_geo[:count]
+
+
+@njit(cache=True, nogil=True)
+def _grown(array, capacity, count):
+    out = np.empty((capacity,) + array.shape[1:], dtype=array.dtype)
+    out[:count] = array[:count]
+    return out
 
 
 @njit(cache=True, nogil=True)

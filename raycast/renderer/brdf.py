@@ -46,6 +46,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 import math
 
+from numba import njit, vectorize
 import numpy as np
 
 from raycast.renderer.ggx_tables import (
@@ -127,28 +128,40 @@ def valid_reflection_normal(n_geo, wo, n_shade):
     ----------
     n_geo, wo, n_shade : (m, 3) float unit vectors; ``n_geo.wo >= 0``.
     """
-    cos_no = _dot(n_shade, wo)
-    i_z = _dot(wo, n_geo)
-    mirror_z = 2.0 * cos_no * _dot(n_shade, n_geo) - i_z
-    threshold = np.minimum(0.9 * i_z, 0.01)
-    bend = mirror_z < threshold
-    if not bend.any():
-        return n_shade
-    ng, wo_b, ns = n_geo[bend], wo[bend], n_shade[bend]
-    i_z, threshold = i_z[bend], threshold[bend]
-    x_axis = ns - _dot(ns, ng)[:, None] * ng
-    length = np.linalg.norm(x_axis, axis=1, keepdims=True)
-    x_axis = np.where(length > 0.0, x_axis / np.where(length > 0.0, length, 1.0), ns)
-    i_x = _dot(wo_b, x_axis)
-    a = i_x * i_x + i_z * i_z
-    b = 2.0 * (a + i_z * threshold)
-    c = (threshold + i_z) ** 2
-    root = np.sqrt(np.maximum(b * b - 4.0 * a * c, 0.0))
-    n_z2 = np.where(i_x < 0.0, 0.25 * (b + root) / a, 0.25 * (b - root) / a)
-    bent = np.sqrt(np.maximum(1.0 - n_z2, 0.0))[:, None] * x_axis + np.sqrt(np.maximum(n_z2, 0.0))[:, None] * ng
     out = np.array(n_shade, dtype=np.result_type(n_shade, np.float32), copy=True)
-    out[bend] = bent
+    _bend_normals(
+        np.ascontiguousarray(n_geo, dtype=float), np.ascontiguousarray(wo, dtype=float), np.asarray(n_shade, float), out
+    )
     return out
+
+
+@njit(cache=True, nogil=True)
+def _bend_normals(n_geo, wo, n_shade, out):
+    """Write the valid-reflection normal into ``out`` where the shading normal needs bending."""
+    for k in range(len(out)):
+        gx, gy, gz = n_geo[k, 0], n_geo[k, 1], n_geo[k, 2]
+        sx, sy, sz = n_shade[k, 0], n_shade[k, 1], n_shade[k, 2]
+        ox, oy, oz = wo[k, 0], wo[k, 1], wo[k, 2]
+        i_z = ox * gx + oy * gy + oz * gz
+        cos_sg = sx * gx + sy * gy + sz * gz
+        mirror_z = 2.0 * (sx * ox + sy * oy + sz * oz) * cos_sg - i_z
+        threshold = min(0.9 * i_z, 0.01)
+        if not mirror_z < threshold:
+            continue
+        x, y, z = sx - cos_sg * gx, sy - cos_sg * gy, sz - cos_sg * gz
+        length = math.sqrt(x * x + y * y + z * z)
+        if length > 0.0:
+            x, y, z = x / length, y / length, z / length
+        else:
+            x, y, z = sx, sy, sz
+        i_x = ox * x + oy * y + oz * z
+        a = i_x * i_x + i_z * i_z
+        b = 2.0 * (a + i_z * threshold)
+        c = (threshold + i_z) ** 2
+        root = math.sqrt(max(b * b - 4.0 * a * c, 0.0))
+        n_z2 = 0.25 * (b + root) / a if i_x < 0.0 else 0.25 * (b - root) / a
+        along, up = math.sqrt(max(1.0 - n_z2, 0.0)), math.sqrt(max(n_z2, 0.0))
+        out[k, 0], out[k, 1], out[k, 2] = along * x + up * gx, along * y + up * gy, along * z + up * gz
 
 
 class BRDF:
@@ -226,19 +239,30 @@ def _ggx_lobe(ci, co, cos_io, alpha, masking, valid=None):
     """
     if valid is None:
         valid = (ci > 0.0) & (co > 0.0)
-    h_len = np.sqrt(np.maximum(2.0 + 2.0 * cos_io, 0.0))
-    cos_nh = np.clip((ci + co) / np.where(h_len > 0.0, h_len, 1.0), 0.0, 1.0)
-    cos_hi = np.clip(0.5 * h_len, 0.0, 1.0)
-    ci_safe = np.where(valid, ci, 1.0)
-    co_safe = np.where(valid, co, 1.0)
-    lam_i = smith_lambda(ci_safe, alpha)
-    lam_o = smith_lambda(co_safe, alpha)
-    if masking == "separable":
-        g = 1.0 / ((1.0 + lam_i) * (1.0 + lam_o))
-    else:
-        g = 1.0 / (1.0 + lam_i + lam_o)
-    value = ggx_distribution(cos_nh, alpha) * g / (4.0 * ci_safe * co_safe)
-    return np.where(valid, value, 0.0), cos_hi
+    cos_hi = np.clip(0.5 * np.sqrt(np.maximum(2.0 + 2.0 * np.asarray(cos_io, dtype=float), 0.0)), 0.0, 1.0)
+    return _ggx_lobe_value(ci, co, cos_io, valid, float(alpha), masking == "separable"), cos_hi
+
+
+@vectorize(cache=True, nopython=True)
+def _ggx_lobe_value(ci, co, cos_io, valid, alpha, separable):
+    """:func:`_ggx_lobe`'s value at one point (a ufunc: one pass, no temporaries)."""
+    if not valid:
+        return 0.0
+    h_len = math.sqrt(max(2.0 + 2.0 * cos_io, 0.0))
+    cos_nh = min(max((ci + co) / (h_len if h_len > 0.0 else 1.0), 0.0), 1.0)
+    alpha2 = alpha * alpha
+    lam_i = _lambda(ci, alpha2)
+    lam_o = _lambda(co, alpha2)
+    g = 1.0 / ((1.0 + lam_i) * (1.0 + lam_o)) if separable else 1.0 / (1.0 + lam_i + lam_o)
+    d = alpha2 / (math.pi * (1.0 + (alpha2 - 1.0) * cos_nh * cos_nh) ** 2)
+    return d * g / (4.0 * ci * co)
+
+
+@njit(cache=True, nogil=True)
+def _lambda(cos_n, alpha2):
+    """:func:`smith_lambda` of one cosine, ``alpha2`` = alpha**2."""
+    c2 = min(max(cos_n * cos_n, 1e-300), 1.0)
+    return 0.5 * (math.sqrt(1.0 + alpha2 * max(1.0 / c2 - 1.0, 0.0)) - 1.0)
 
 
 @dataclass(frozen=True)

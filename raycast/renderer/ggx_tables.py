@@ -17,12 +17,21 @@ evaluated on first use by a deterministic quadrature over half vectors.
 
 Grid node i of n stands for the value i / (n - 1) of its coordinate, clamped to [1e-4, 1]
 (roughness, mu) or [1e-4, 0.99] (z), as in Cycles' precomputation.
+
+A node costs 0.3-0.5 s of quadrature, and a Principled material needs four to eight: each
+computed node is kept on disk, in ``$RSODB_CACHE_DIR`` (default ``~/.cache/rsodb``) under
+``ggx_tables/<SHA-256 of this module's source>/``, so a changed quadrature computes anew and
+a fresh process (a fit's workers, the CLI) reads what an earlier one computed.
 """
 
 from __future__ import annotations
 
-from functools import cache
+from functools import cache, wraps
+import hashlib
 import math
+import os
+from pathlib import Path
+import tempfile
 
 import numpy as np
 
@@ -98,7 +107,34 @@ def _hemisphere_means(roughness, mu, fresnel=None):
     return float(np.mean(jacobian / (1.0 + lam_v) * fresnel(np.clip(cos_hv, 0.0, 1.0))))
 
 
-@cache
+def _table_dir():
+    root = Path(os.environ.get("RSODB_CACHE_DIR", Path.home() / ".cache" / "rsodb"))
+    return root / "ggx_tables" / hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:16]
+
+
+def _stored(compute):
+    """Keep each node ``compute(*indices)`` in memory and on disk (module docstring)."""
+
+    @cache
+    @wraps(compute)
+    def node(*indices):
+        path = _table_dir() / f"{compute.__name__.strip('_')}-{'-'.join(map(str, indices))}.npy"
+        if path.exists():
+            return np.load(path)
+        value = np.asarray(compute(*indices), dtype=float)
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            with tempfile.NamedTemporaryFile(dir=path.parent, suffix=".tmp", delete=False) as handle:
+                np.save(handle, value)
+            os.replace(handle.name, path)  # readers never see half a file
+        except OSError:
+            pass  # a read-only cache directory costs time, not correctness
+        return value
+
+    return node
+
+
+@_stored
 def _e_column(rough_index):
     """(32,) E at one roughness node over the mu nodes."""
     roughness = _node(rough_index, _E_SIZE, 1e-4, 1.0)
@@ -107,7 +143,7 @@ def _e_column(rough_index):
     ).clip(0.0, 1.0)
 
 
-@cache
+@_stored
 def _e_average(rough_index):
     roughness = _node(rough_index, _E_SIZE, 1e-4, 1.0)
     nodes, weights = np.polynomial.legendre.leggauss(_N_MU_AVG)
@@ -116,7 +152,7 @@ def _e_average(rough_index):
     return float(np.clip(np.sum(0.5 * weights * 2.0 * mus * values), 0.0, 1.0))
 
 
-@cache
+@_stored
 def _s_column(rough_index, z_index):
     """(16,) s at one (roughness, z) node over the mu nodes."""
     roughness = _node(rough_index, _S_SIZE, 1e-4, 1.0)
@@ -143,18 +179,37 @@ def _position(value, size):
 
 
 def _interpolate_mu(column, mu):
-    low, high, t = _position(mu, len(column))
-    return (1.0 - t) * column[low] + t * column[high]
+    """Linear interpolation of a column over its mu nodes, mu clamped to [0, 1] (as np.interp does)."""
+    return np.interp(mu, np.linspace(0.0, 1.0, len(column)), column)
+
+
+@cache
+def _e_curve(roughness):
+    """(32,) E over the mu nodes at ``roughness``: the two roughness columns mixed once, so a
+    call interpolates over mu only (linear interpolation is linear in the nodes' values)."""
+    low, high, t = _position(roughness, _E_SIZE)
+    curve = (1.0 - t) * _e_column(int(low))
+    if t > 0.0:
+        curve = curve + t * _e_column(int(high))
+    return curve
+
+
+@cache
+def _s_curve(roughness, z):
+    """(16,) s over the mu nodes at (``roughness``, ``z``), mixed as :func:`_e_curve`."""
+    r_low, r_high, r_t = _position(roughness, _S_SIZE)
+    z_low, z_high, z_t = _position(z, _S_SIZE)
+    curve = np.zeros(_S_SIZE)
+    for r_index, r_weight in ((r_low, 1.0 - r_t), (r_high, r_t)):
+        for z_index, z_weight in ((z_low, 1.0 - z_t), (z_high, z_t)):
+            if r_weight * z_weight > 0.0:
+                curve = curve + r_weight * z_weight * _s_column(int(r_index), int(z_index))
+    return curve
 
 
 def ggx_albedo(roughness, mu):
     """E(roughness, mu): directional albedo of GGX (Fresnel 1) at view cosine ``mu`` (array)."""
-    low, high, t = _position(float(roughness), _E_SIZE)
-    mu = np.asarray(mu, dtype=float)
-    value = (1.0 - t) * _interpolate_mu(_e_column(int(low)), mu)
-    if t > 0.0:
-        value = value + t * _interpolate_mu(_e_column(int(high)), mu)
-    return value
+    return _interpolate_mu(_e_curve(float(roughness)), np.asarray(mu, dtype=float))
 
 
 def ggx_average_albedo(roughness):
@@ -169,12 +224,4 @@ def ggx_average_albedo(roughness):
 def dielectric_fresnel_mean(roughness, mu, eta):
     """s(roughness, mu, eta): the VNDF mean of the remapped dielectric Fresnel (module docstring)."""
     z = math.sqrt(abs((eta - 1.0) / (eta + 1.0)))
-    r_low, r_high, r_t = _position(float(roughness), _S_SIZE)
-    z_low, z_high, z_t = _position(z, _S_SIZE)
-    mu = np.asarray(mu, dtype=float)
-    value = np.zeros(mu.shape)
-    for r_index, r_weight in ((r_low, 1.0 - r_t), (r_high, r_t)):
-        for z_index, z_weight in ((z_low, 1.0 - z_t), (z_high, z_t)):
-            if r_weight * z_weight > 0.0:
-                value = value + r_weight * z_weight * _interpolate_mu(_s_column(int(r_index), int(z_index)), mu)
-    return value
+    return _interpolate_mu(_s_curve(float(roughness), z), np.asarray(mu, dtype=float))
