@@ -178,6 +178,10 @@ def test_ggx_table_nodes_are_kept_on_disk_and_read_back(tmp_path, monkeypatch):
     np.testing.assert_array_equal(first, quadrature(3, 4))
     # The directory is named by the module source's hash: a changed quadrature computes anew.
     assert files[0].parent.name == ggx_tables._table_dir().name
+    # A damaged node file is computed again and replaced, never read as numbers.
+    files[0].write_bytes(b"\x93NUMPY garbage")
+    np.testing.assert_array_equal(stored(3, 4), first)
+    np.testing.assert_array_equal(np.load(files[0]), first)
 
 
 def test_mixed_table_nodes_interpolate_as_the_separate_nodes():

@@ -119,8 +119,10 @@ def _stored(compute):
     @wraps(compute)
     def node(*indices):
         path = _table_dir() / f"{compute.__name__.strip('_')}-{'-'.join(map(str, indices))}.npy"
-        if path.exists():
+        try:
             return np.load(path)
+        except (OSError, ValueError):
+            pass  # not computed yet, or damaged (by something else: writes are atomic): computed anew
         value = np.asarray(compute(*indices), dtype=float)
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
