@@ -55,7 +55,7 @@ _MAX_PENDING_BYTES = 256 << 20
 # Below this many files a process pool costs more (start-up, imports) than it saves.
 _MIN_FILES_FOR_POOL = 16
 _CHUNK_FILES = 4
-_READ_AHEAD_CHUNKS_PER_WORKER = 32
+_READ_AHEAD_CHUNKS_PER_WORKER = 64
 # Readers stage objects' next files while at least this share of a round's files are the only
 # file of their object (below it, most of their staging would be thrown away).
 _SOLE_SHARE_FOR_STAGING = 0.5
@@ -247,7 +247,7 @@ def _results(
         return
     chunks = [paths[i : i + _CHUNK_FILES] for i in range(0, len(paths), _CHUNK_FILES)]
     # Read far enough ahead that the readers keep parsing while the parent commits (a commit
-    # round over 50 objects takes up to seconds late in a large ingest); ~50 MB of 2500-row passes.
+    # round over hundreds of objects takes a second or more in a large archive); ~100 MB of 2500-row passes.
     window = _READ_AHEAD_CHUNKS_PER_WORKER * workers
     # Spawned, not forked: a fork taken while another thread of this process holds a lock (an
     # Embree or BLAS pool, a logging handler) can leave the reader waiting on it forever.
