@@ -208,12 +208,15 @@ def _covered(space, result, truth) -> dict[str, bool]:
     return {
         p.name: bool(result.p16[i] <= _on_branch(p, truth[p.name], result.median[i]) <= result.p84[i])
         for i, p in enumerate(space.free)
+        if p.name in truth
     }
 
 
 def _bias_sigma(space, result, truth) -> dict[str, float]:
     bias = {}
     for i, parameter in enumerate(space.free):
+        if parameter.name not in truth:
+            continue
         sigma = 0.5 * (result.p84[i] - result.p16[i])
         value = _on_branch(parameter, truth[parameter.name], result.median[i])
         bias[parameter.name] = float((result.median[i] - value) / sigma) if sigma > 0 else math.inf
@@ -223,6 +226,8 @@ def _bias_sigma(space, result, truth) -> dict[str, float]:
 def _quantiles(space, result, truth) -> dict[str, float]:
     quantiles = {}
     for i, parameter in enumerate(space.free):
+        if parameter.name not in truth:
+            continue
         draws = result.samples[:, i]
         # The draws are unrolled around their circular mean: put the truth on their branch.
         value = _on_branch(parameter, truth[parameter.name], np.median(draws))
@@ -279,7 +284,9 @@ def recover_observed(
     chain.with_name(chain.name + ".bak").unlink(missing_ok=True)
     space = problem.posterior.space
     names = space.names
-    truth = {name: float(truth[name]) for name in names}
+    # A parameter the data were not drawn with (the jitter of passes with Gaussian noise only,
+    # as the Cycles passes) has no truth to hold: it is fitted, not scored.
+    truth = {name: float(truth[name]) for name in names if name in truth}
     return Recovery(
         truth,
         dict(zip(names, result.median.tolist())),
