@@ -419,8 +419,11 @@ def stage_files(transaction: ObjectTransaction, norad: int, files: Sequence[Pend
         if "results" not in file and current.before is not None and current.results:
             layout.write_results(file, current.results)  # a schema-1 file: its results get their table
         # Attributes are slow to write: the object's name only when it changes.
-        changed = {key: value for key, value in (("name", name), ("cospar", cospar)) if value}
-        changed = {key: value for key, value in changed.items() if attr_text(current.attrs.get(key, "")) != value}
+        changed = {
+            key: value
+            for key, value in (("name", name), ("cospar", cospar))
+            if value and attr_text(current.attrs.get(key, "")) != value
+        }
         layout.set_attrs(file, {"freed_bytes": freed, **changed})
 
     results = current._results if current.before is not None else []  # None: unchanged, not read

@@ -7,9 +7,10 @@ the passes per object and commits them in batches, publishing a reader's file wh
 object's only file in the round and the object file has not changed since (a night of one new
 pass per object), and staging the object itself otherwise (many files of one object, or another
 writer in between). While most files of a round share their object with others, the readers stop
-staging (their work would be thrown away) until a round shows single files again. A commit copies the object's current file, so
-committing after every file would cost time quadratic in the object's size; committing too rarely
-would lose more work to a crash and hold more passes in memory. The parent therefore commits
+staging (their work would be thrown away) until a round shows single files again.
+
+A commit copies the object's current file, so committing after every file would cost time
+quadratic in the object's size; committing too rarely would lose more work to a crash and hold more passes in memory. The parent therefore commits
 every `commit_interval_s` seconds, but never sooner than `_COMMIT_SPACING` times the duration of
 its previous commit (so commits take at most ~1/(1 + spacing) of the wall time however large the
 objects grow), and whenever the passes waiting in memory exceed `_MAX_PENDING_BYTES`.
@@ -42,7 +43,7 @@ from rsodb.archive import layout
 from rsodb.archive.commits import ObjectTransaction, stage_files
 from rsodb.archive.discovery import find_observation_files
 from rsodb.archive.ingest_report import CommitEvent, IngestReport, IngestWarning, PendingFile
-from rsodb.archive.locking import ObjectLock, remove_abandoned_staging
+from rsodb.archive.locking import ObjectLock
 from rsodb.pool import default_processes
 
 if TYPE_CHECKING:
@@ -179,10 +180,9 @@ def _read_chunk(paths: list[str], stage_in: tuple[Path, Path] | None):
 @contextmanager
 def _staging_directory(archive_path: Path):
     """A private directory for this run's staged files under ``<archive>/staging``, removed at the
-    end; directories of runs that were killed are removed first (their lock is free)."""
+    end (those of killed runs are removed when an `Archive` is opened)."""
     root = archive_path / layout.STAGING_DIR
     root.mkdir(exist_ok=True)
-    remove_abandoned_staging(root)
     name = f"{os.getpid()}.{secrets.token_hex(4)}"
     lock = ObjectLock(root / f"{name}.lock", timeout_s=0)
     lock.acquire()

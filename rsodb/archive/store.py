@@ -448,19 +448,17 @@ class Archive:
         path = self.object_path(norad)
         try:
             with open_object(path) as file:
-                return {
-                    pass_id: attr_text(attrs["content_sha256"])
-                    for pass_id, attrs in (
-                        (pass_id, layout.get_attrs(group, ("content_sha256",)))
-                        for pass_id, group in file["passes"].items()
-                    )
-                    if "content_sha256" in attrs
-                }
+                hashes = {}
+                for pass_id, group in file["passes"].items():
+                    attrs = layout.get_attrs(group, ("content_sha256",))
+                    if attrs:
+                        hashes[pass_id] = attr_text(attrs["content_sha256"])
+                return hashes
         except FileNotFoundError:
             return {}
+        except DamagedObjectError:
+            raise
         except (KeyError, OSError, RuntimeError) as exc:
-            if isinstance(exc, DamagedObjectError):
-                raise
             raise DamagedObjectError(path, f"its passes cannot be listed ({str(exc).splitlines()[0]})") from None
 
     def results(self, pass_id: str) -> list[ResultSummary]:
