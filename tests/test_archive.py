@@ -156,6 +156,34 @@ def test_changed_file_becomes_a_new_version(tmp_path, shared_data):
     assert archive.ingest([source], progress=False, workers=0).already_present == (str(source),)
 
 
+def test_index_written_row_by_row_equals_one_read_from_the_files(tmp_path, shared_data):
+    """A commit to an object the index already describes writes only the rows that changed (the
+    new pass, the superseded row); the index must then hold what a rebuild from the files gives."""
+    source = tmp_path / "in" / TOPEX_PHV.name
+    source.parent.mkdir()
+    shutil.copy(TOPEX_PHV, source)
+    archive = Archive(tmp_path / "archive")
+    archive.ingest([source], progress=False, workers=0)
+    lines = source.read_text().splitlines(keepends=True)
+    row = next(i for i, line in enumerate(lines) if not line.startswith("#"))
+    lines[row] = lines[row].replace(" 4.467 ", " 4.567 ", 1)
+    source.write_text("".join(lines))
+    archive.ingest([source], progress=False, workers=0)  # a new version: the old row changes
+    rng = np.random.default_rng(5)
+    start = np.datetime64("2025-03-01T18:00", "ns")
+    archive.add([synthetic_pass(22076, start + np.timedelta64(k, "D"), 50, rng) for k in range(3)])
+    archive.add([synthetic_pass(22076, start + np.timedelta64(9, "D"), 50, rng)])
+
+    def index_rows():
+        return sorted((vars(row) for row in archive.summaries(all_versions=True)), key=lambda row: row["pass_id"])
+
+    incremental = index_rows()
+    assert len(incremental) == 6
+    assert sum(row["superseded_by"] is not None for row in incremental) == 1
+    archive.rebuild_index()
+    assert [str(row) for row in index_rows()] == [str(row) for row in incremental]
+
+
 def test_same_observation_under_another_name_is_a_version(tmp_path, shared_data):
     archive = Archive(tmp_path / "archive")
     archive.ingest([COSMOS2540_PHV], progress=False, workers=0)

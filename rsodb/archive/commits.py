@@ -105,6 +105,8 @@ class Staged:
     before : ObjectState or None
     event : CommitEvent or None
         What an ingest reports once the file is published.
+    changed : list of PassSummary or None
+        The rows that differ from those of `before` (None: not known, the index takes them all).
     """
 
     norad: int
@@ -118,6 +120,7 @@ class Staged:
     duplicates: list[DuplicateSource]
     before: ObjectState | None = None
     event: CommitEvent | None = None
+    changed: list[PassSummary] | None = None
 
 
 @dataclass
@@ -269,15 +272,16 @@ class ObjectTransaction:
         results: Iterable[ResultSummary] | None,
         duplicates: list[DuplicateSource],
         event: CommitEvent | None = None,
+        changed: list[PassSummary] | None = None,
     ) -> None:
         """`write` the object's next file and stage it for `publish` with what the index records
         of it: its name and COSPAR id, catalog rows, results (read once `build` has run; None:
-        unchanged) and duplicate sources."""
+        unchanged), duplicate sources and the rows that changed (None: not known)."""
         tmp = self.write(current, build)
         state = ObjectState.of(norad, os.stat(tmp))
         results = None if results is None else list(results)
         self.staged.append(
-            Staged(norad, current.final, tmp, state, *names, rows, results, duplicates, current.before, event)
+            Staged(norad, current.final, tmp, state, *names, rows, results, duplicates, current.before, event, changed)
         )
 
     def publish(self) -> list[Staged]:
@@ -291,7 +295,16 @@ class ObjectTransaction:
             raise
         try:
             self.index.replace_objects(
-                (item.state, item.name, item.cospar, item.rows, item.results, item.duplicates, item.before)
+                (
+                    item.state,
+                    item.name,
+                    item.cospar,
+                    item.rows,
+                    item.results,
+                    item.duplicates,
+                    item.before,
+                    item.changed,
+                )
                 for item in staged
             )
         except sqlite3.Error:
@@ -427,8 +440,19 @@ def stage_files(transaction: ObjectTransaction, norad: int, files: Sequence[Pend
         layout.set_attrs(file, {"freed_bytes": freed, **changed})
 
     results = current._results if current.before is not None else []  # None: unchanged, not read
-    transaction.finish(norad, current, build, (name, cospar), rows, results, duplicates, event)
+    transaction.finish(norad, current, build, (name, cospar), rows, results, duplicates, event, _changed(current, rows))
     return event
+
+
+def _changed(current: Current, rows: list[PassSummary]) -> list[PassSummary] | None:
+    """The rows new or changed since `current` was read (None when a row of it is gone)."""
+    if current.before is None:
+        return None
+    before = {row.pass_id: row for row in current.rows}
+    ids = {row.pass_id for row in rows}
+    if any(pass_id not in ids for pass_id in before):
+        return None
+    return [row for row in rows if before.get(row.pass_id) != row]
 
 
 # -- results -------------------------------------------------------------------------------

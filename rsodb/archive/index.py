@@ -356,11 +356,13 @@ class CatalogIndex:
 
         Parameters
         ----------
-        entries : iterable of (ObjectState, name, cospar, passes, results, duplicates[, before])
+        entries : iterable of (ObjectState, name, cospar, passes, results, duplicates[, before[, changed]])
             Per object: the file's identity, the object's name and COSPAR id, its catalog rows,
             result summaries and duplicate sources. `results` None means "unchanged": the index
             keeps its result rows if it described the file the commit started from (`before`);
-            otherwise it records the object as stale, to be read again from its file.
+            otherwise it records the object as stale, to be read again from its file. `changed`,
+            when given, are the catalog rows that differ from those of `before`: if the index
+            described `before`, only they are written (an object of many passes gains one a night).
         """
         entries = list({entry[0].norad: entry for entry in entries}.values())  # the last of an object
         if not entries:
@@ -380,20 +382,28 @@ class CatalogIndex:
                     )
                 )
             objects, pass_rows, result_rows, source_rows, keep, drop = [], [], [], [], [], []
-            for state, name, cospar, passes, results, duplicates, *before in entries:
-                stale = False
-                if results is None:
-                    previous = before[0] if before else None
-                    stale = previous is None or indexed.get(state.norad) != (
-                        previous.ino,
-                        previous.size,
-                        previous.mtime_ns,
-                    )
-                (keep if results is None and not stale else drop).append(state.norad)
+            delta, replaced_ids, drop_results = [], [], []  # objects whose unchanged pass rows stay; the rows that go
+            for state, name, cospar, passes, results, duplicates, *extra in entries:
+                previous = extra[0] if extra else None
+                changed = extra[1] if len(extra) > 1 else None
+                described = previous is not None and indexed.get(state.norad) == (
+                    previous.ino,
+                    previous.size,
+                    previous.mtime_ns,
+                )
+                stale = results is None and not described
+                if described and changed is not None:
+                    delta.append(state.norad)
+                    if results is not None:
+                        drop_results.append(state.norad)
+                    replaced_ids += [row.pass_id for row in changed]
+                    pass_rows += [_pass_values(row) for row in changed]
+                else:
+                    (keep if results is None and not stale else drop).append(state.norad)
+                    pass_rows += [_pass_values(row) for row in passes]
                 # -1 never matches a file: a stale object is read again from its file.
                 ino = -1 if stale else state.ino
                 objects.append((state.norad, ino, state.size, state.mtime_ns, state.status, state.error, name, cospar))
-                pass_rows += [_pass_values(row) for row in passes]
                 result_rows += [
                     (
                         item.pass_id,
@@ -414,6 +424,14 @@ class CatalogIndex:
                 ]
             self._delete_many(db, keep, keep_results=True)
             self._delete_many(db, drop)
+            for chunk in _chunks(delta):
+                marks = ",".join("?" * len(chunk))
+                db.execute(f"DELETE FROM objects WHERE norad IN ({marks})", chunk)
+                db.execute(f"DELETE FROM sources WHERE norad IN ({marks})", chunk)
+            for chunk in _chunks(drop_results):
+                db.execute(f"DELETE FROM results WHERE norad IN ({','.join('?' * len(chunk))})", chunk)
+            for chunk in _chunks(replaced_ids):
+                db.execute(f"DELETE FROM passes WHERE pass_id IN ({','.join('?' * len(chunk))})", chunk)
             db.executemany("INSERT INTO objects VALUES (?, ?, ?, ?, ?, ?, ?, ?)", objects)
             db.executemany(_INSERT_PASS, pass_rows)
             db.executemany("INSERT OR REPLACE INTO results VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)", result_rows)

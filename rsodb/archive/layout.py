@@ -112,6 +112,8 @@ SAMPLE_UNITS = {
 # sized to the longest value of each table, inline in the table's chunk, so the table's Fletcher32
 # checksum covers it (HDF5's variable-length strings live in a heap no checksum covers).
 TEXT = "text"
+# Text columns of the tables rewritten at every commit are padded to a multiple of this width.
+_WIDTH_STEP = 16
 CATALOG_FIELDS = (
     ("pass_id", TEXT),
     ("lineage_id", TEXT),
@@ -157,14 +159,24 @@ ROW_PROBLEMS_FIELDS = (("line", "<i8"), ("reason", TEXT), ("text", TEXT))
 LIBVER = ("v110", "latest")
 
 
-def text_table(fields, rows: list[tuple]) -> np.ndarray:
-    """A structured array of `rows` with `fields`; text encoded as UTF-8 fixed-length bytes."""
+def text_table(fields, rows: list[tuple], width_step: int = 1) -> np.ndarray:
+    """A structured array of `rows` with `fields`; text encoded as UTF-8 fixed-length bytes.
+
+    Each text column is as wide as its longest value, rounded up to a multiple of `width_step`
+    (read back the same: NUL padding is dropped). A step above 1 lets tables rewritten often share
+    a few HDF5 types, which are costly to build.
+    """
     encoded = [
         tuple(value.encode("utf-8") if kind == TEXT else value for value, (_, kind) in zip(row, fields)) for row in rows
     ]
     dtype = np.dtype(
         [
-            (name, f"S{max([1] + [len(row[i]) for row in encoded])}" if kind == TEXT else kind)
+            (
+                name,
+                f"S{-(-max([1] + [len(row[i]) for row in encoded]) // width_step) * width_step}"
+                if kind == TEXT
+                else kind,
+            )
             for i, (name, kind) in enumerate(fields)
         ]
     )
@@ -341,6 +353,35 @@ def set_attrs(node: h5py.HLObject, values: dict) -> None:
         h5py.h5a.create(node.id, key, _ATTR_TYPES[kind], h5py.h5s.create(h5py.h5s.SCALAR)).write(data)
 
 
+# Numpy dtypes (and their HDF5 memory types) of stored types, by the stored type's encoding:
+# h5py derives them anew on every high-level read, ~0.1 ms a field for a table's compound type.
+_MEMORY_TYPES: dict[bytes, tuple[np.dtype, h5py.h5t.TypeID]] = {}
+
+
+def _memory_type(type_id: h5py.h5t.TypeID) -> tuple[np.dtype, h5py.h5t.TypeID]:
+    key = type_id.encode()
+    found = _MEMORY_TYPES.get(key)
+    if found is None:
+        if len(_MEMORY_TYPES) > 256:
+            _MEMORY_TYPES.clear()
+        dtype = type_id.dtype
+        found = _MEMORY_TYPES[key] = (dtype, h5py.h5t.py_create(dtype))  # as h5py reads
+    return found
+
+
+def read_table(node: h5py.Group, name: str) -> np.ndarray:
+    """``node[name][()]`` through h5py's low-level API with cached types (a KeyError if absent).
+
+    A failed Fletcher32 checksum raises OSError, as the high-level read does.
+    """
+    dataset = h5py.h5d.open(node.id, name.encode())
+    dtype, memory_type = _memory_type(dataset.get_type())
+    data = np.empty(dataset.shape, dtype=dtype)
+    if data.size:
+        dataset.read(h5py.h5s.ALL, h5py.h5s.ALL, data, memory_type)
+    return data
+
+
 def get_attrs(node: h5py.HLObject, names) -> dict:
     """``{name: node.attrs[name]}`` for those of `names` that `node` has (variable-length text as str)."""
     found = {}
@@ -349,8 +390,9 @@ def get_attrs(node: h5py.HLObject, names) -> dict:
         if not h5py.h5a.exists(node.id, key):
             continue
         attr = h5py.h5a.open(node.id, key)
-        data = np.empty(attr.shape, dtype=attr.dtype)
-        attr.read(data)
+        dtype, memory_type = _memory_type(attr.get_type())
+        data = np.empty(attr.shape, dtype=dtype)
+        attr.read(data, memory_type)
         value = data[()]
         if isinstance(value, bytes) and h5py.check_string_dtype(attr.dtype) is not None:
             value = value.decode(h5py.check_string_dtype(attr.dtype).encoding)
@@ -416,7 +458,7 @@ def write_file_attributes(file: h5py.File, norad: int) -> None:
 def read_samples(group: h5py.Group) -> np.ndarray:
     """The samples table of a pass group; a failed Fletcher32 checksum raises `DamagedPassError`."""
     try:
-        return group["samples"][()]
+        return read_table(group, "samples")
     except OSError as exc:
         raise DamagedPassError(f"the samples of {group.name} fail their checksum ({exc})") from None
 
@@ -430,7 +472,7 @@ def read_metadata(group: h5py.Group) -> dict:
         problems = None
         if "row_problems" in group:
             try:
-                problems = group["row_problems"][()]
+                problems = read_table(group, "row_problems")
             except OSError as exc:
                 raise DamagedPassError(f"the row problems of {group.name} fail their checksum ({exc})") from None
         if content_sha256(samples, text, problems) != attr_text(expected):
@@ -457,7 +499,7 @@ def read_pass(group: h5py.Group, superseded_by: str | None = None) -> StoredPass
     if "row_problems" in group:
         problems = tuple(
             RowProblem(int(line), attr_text(reason), attr_text(text))
-            for line, reason, text in group["row_problems"][()].tolist()
+            for line, reason, text in read_table(group, "row_problems").tolist()
         )
     return StoredPass(
         norad=meta["norad"],
@@ -501,7 +543,7 @@ def _read_table(file: h5py.File, name: str) -> np.ndarray | None:
     if name not in file:
         return None
     try:
-        return file[name][()]
+        return read_table(file, name)
     except OSError as exc:
         raise DamagedPassError(f"the /{name} table fails its checksum ({exc})") from None
 
@@ -561,7 +603,7 @@ def write_catalog(file: h5py.File, rows: list[PassSummary]) -> None:
         )
         for row in rows
     ]
-    _replace_table(file, "catalog", text_table(CATALOG_FIELDS, records))
+    _replace_table(file, "catalog", text_table(CATALOG_FIELDS, records, _WIDTH_STEP))
 
 
 def read_catalog(file: h5py.File) -> list[PassSummary]:
@@ -670,7 +712,7 @@ def write_results(file: h5py.File, results: list[ResultSummary]) -> None:
         )
         for item in results
     ]
-    _replace_table(file, "results", text_table(RESULTS_FIELDS, records))
+    _replace_table(file, "results", text_table(RESULTS_FIELDS, records, _WIDTH_STEP))
 
 
 def read_results(file: h5py.File) -> list[ResultSummary]:
@@ -706,7 +748,7 @@ def read_results(file: h5py.File) -> list[ResultSummary]:
 def write_duplicates(file: h5py.File, duplicates: list[DuplicateSource]) -> None:
     """Replace ``/duplicates`` with `duplicates`."""
     records = [(item.sha256, item.source_name, item.pass_id, item.ingested_utc, item.note) for item in duplicates]
-    _replace_table(file, "duplicates", text_table(DUPLICATES_FIELDS, records))
+    _replace_table(file, "duplicates", text_table(DUPLICATES_FIELDS, records, _WIDTH_STEP))
 
 
 def read_duplicates(file: h5py.File) -> list[DuplicateSource]:
