@@ -166,23 +166,19 @@ def text_table(fields, rows: list[tuple], width_step: int = 1) -> np.ndarray:
     (read back the same: NUL padding is dropped). A step above 1 lets tables rewritten often share
     a few HDF5 types, which are costly to build.
     """
-    encoded = [
-        tuple(value.encode("utf-8") if kind == TEXT else value for value, (_, kind) in zip(row, fields)) for row in rows
-    ]
-    dtype = np.dtype(
-        [
-            (
-                name,
-                f"S{-(-max([1] + [len(row[i]) for row in encoded]) // width_step) * width_step}"
-                if kind == TEXT
-                else kind,
-            )
-            for i, (name, kind) in enumerate(fields)
-        ]
-    )
-    table = np.empty(len(encoded), dtype=dtype)
-    for i, row in enumerate(encoded):
-        table[i] = row
+    columns = list(zip(*rows)) if rows else [()] * len(fields)
+    values, dtype = {}, []
+    for (name, kind), column in zip(fields, columns):  # column by column: one C loop a column
+        if kind == TEXT:
+            column = [value.encode("utf-8") for value in column]
+            width = max([1, *map(len, column)])
+            kind = f"S{-(-width // width_step) * width_step}"
+        values[name] = column
+        dtype.append((name, kind))
+    table = np.empty(len(rows), dtype=dtype)
+    if rows:
+        for name, column in values.items():
+            table[name] = column
     return table
 
 
@@ -606,51 +602,35 @@ def write_catalog(file: h5py.File, rows: list[PassSummary]) -> None:
     _replace_table(file, "catalog", text_table(CATALOG_FIELDS, records, _WIDTH_STEP))
 
 
+# The PassSummary fields a catalog row stores, in the order of the class (the period columns
+# come from the index's results).
+_SUMMARY_FIELDS = tuple(
+    field.name for field in dataclasses.fields(PassSummary) if field.name not in ("period_s", "period_err_s", "verdict")
+)
+
+
 def read_catalog(file: h5py.File) -> list[PassSummary]:
     """The rows of ``/catalog`` in storage order (files of schema 1 lack the last columns)."""
     table = _read_table(file, "catalog")
     if table is None:
         return []
-    names = table.dtype.names
-    # Whole columns as Python values at once: indexing a structured array element by element
-    # costs microseconds a field.
-    columns = {
-        name: [attr_text(value) for value in table[name].tolist()]
-        if table.dtype[name].kind in "OS"
-        else table[name].tolist()
-        for name in names
-    }
     n = len(table)
-    absent = {"n_row_problems": [0] * n, "n_warnings": [0] * n, "elements": [""] * n}  # schema 1
-    columns = absent | columns
-    starts = table["start_utc"].astype("datetime64[ns]")
-    ends = table["end_utc"].astype("datetime64[ns]")
-    rows = [
-        PassSummary(
-            pass_id=columns["pass_id"][i],
-            lineage_id=columns["lineage_id"][i],
-            natural_id=columns["natural_id"][i],
-            version=int(columns["version"][i]),
-            supersedes=columns["supersedes"][i] or None,
-            superseded_by=columns["superseded_by"][i] or None,
-            norad=int(columns["norad"][i]),
-            name=columns["name"][i],
-            band=columns["band"][i],
-            site=columns["site"][i],
-            start_utc=starts[i],
-            end_utc=ends[i],
-            n_points=int(columns["n_points"][i]),
-            exposure_s=float(columns["exposure_s"][i]),
-            source_name=columns["source_name"][i],
-            source_sha256=columns["source_sha256"][i],
-            source_format=columns["source_format"][i],
-            ingested_utc=columns["ingested_utc"][i],
-            n_row_problems=int(columns["n_row_problems"][i]),
-            n_warnings=int(columns["n_warnings"][i]),
-            elements=columns["elements"][i],
-        )
-        for i in range(n)
-    ]
+    # Whole columns as Python values at once: indexing a structured array
+    # element by element costs microseconds a field.
+    columns = {"n_row_problems": [0] * n, "n_warnings": [0] * n, "elements": [""] * n}  # schema 1 lacks them
+    for name in table.dtype.names:
+        kind = table.dtype[name].kind
+        if kind == "S":
+            columns[name] = [value.decode("utf-8") for value in table[name].tolist()]
+        elif kind == "O":
+            columns[name] = [attr_text(value) for value in table[name].tolist()]
+        else:
+            columns[name] = table[name].tolist()
+    columns["start_utc"] = list(table["start_utc"].astype("datetime64[ns]"))
+    columns["end_utc"] = list(table["end_utc"].astype("datetime64[ns]"))
+    for name in ("supersedes", "superseded_by"):
+        columns[name] = [value or None for value in columns[name]]
+    rows = [PassSummary(*values) for values in zip(*(columns[name] for name in _SUMMARY_FIELDS))]
     return rows
 
 
