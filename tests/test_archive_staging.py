@@ -38,6 +38,7 @@ def staged_elsewhere(archive: Archive, path, staging) -> PendingFile:
     with transaction:
         stage_files(transaction, NORAD, [PendingFile(str(path), sha, passes)])
         (item,) = transaction.hand_over()
+        item = item.without_unchanged_rows()  # as a reader sends it
     assert item.tmp.is_file() and item.tmp.parent == staging  # kept after the transaction ended
     return PendingFile(str(path), sha, passes, item)
 
@@ -59,6 +60,22 @@ def test_a_staged_file_is_published_when_the_object_is_unchanged(tmp_path, files
     assert os.stat(archive.object_path(NORAD)).st_ino == inode
     assert stored_sources(archive) == sorted(path.name for path in files[:2])
     assert len(archive.passes(norad=NORAD)) == 2  # both read back, checksums and hashes verified
+
+
+def test_a_staged_file_sent_without_its_rows_is_indexed_from_its_file(tmp_path, files):
+    """A reader sends only the catalog rows that changed; if the index did not describe the file
+    the reader copied, the object is marked stale and read again from its file on the next look."""
+    archive = Archive(tmp_path / "archive")
+    archive.ingest(files[:2], progress=False, workers=0)
+    staging = tmp_path / "staging"
+    staging.mkdir()
+    pending = staged_elsewhere(archive, files[2], staging)
+    assert pending.prepared.rows is None and [row.source_name for row in pending.prepared.changed] == [files[2].name]
+    archive._index.remove_objects([NORAD])  # the index no longer describes the copied file
+    events, failures = archive.commit_many({NORAD: [pending]})
+    assert not failures and [len(event.ingested) for event in events] == [1]
+    assert stored_sources(archive) == sorted(path.name for path in files[:3])
+    assert sorted(row.source_name for row in archive.summaries()) == sorted(path.name for path in files[:3])
 
 
 @pytest.mark.parametrize("object_exists", [True, False])

@@ -101,7 +101,8 @@ class Staged:
     name, cospar : str
     rows, results, duplicates : list
         What the index records for the object; `results` None when they did not change (the
-        index keeps its rows if it described the file that was copied, `before`).
+        index keeps its rows if it described the file that was copied, `before`); `rows` None
+        when only `changed` is sent (otherwise the index reads the object's file again).
     before : ObjectState or None
     event : CommitEvent or None
         What an ingest reports once the file is published.
@@ -115,12 +116,18 @@ class Staged:
     state: ObjectState
     name: str
     cospar: str
-    rows: list[PassSummary]
+    rows: list[PassSummary] | None
     results: list[ResultSummary] | None
     duplicates: list[DuplicateSource]
     before: ObjectState | None = None
     event: CommitEvent | None = None
     changed: list[PassSummary] | None = None
+
+    def without_unchanged_rows(self) -> Staged:
+        """This item as a reader sends it to the committing process: the catalog rows that did not
+        change stay behind when the changed ones are known (pickling every row of a large object
+        was most of what a reader sent back)."""
+        return self if self.changed is None else replace(self, rows=None)
 
 
 @dataclass

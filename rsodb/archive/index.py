@@ -362,7 +362,8 @@ class CatalogIndex:
             keeps its result rows if it described the file the commit started from (`before`);
             otherwise it records the object as stale, to be read again from its file. `changed`,
             when given, are the catalog rows that differ from those of `before`: if the index
-            described `before`, only they are written (an object of many passes gains one a night).
+            described `before`, only they are written (an object of many passes gains one a night);
+            `passes` may then be None.
         """
         entries = list({entry[0].norad: entry for entry in entries}.values())  # the last of an object
         if not entries:
@@ -391,7 +392,8 @@ class CatalogIndex:
                     previous.size,
                     previous.mtime_ns,
                 )
-                stale = results is None and not described
+                # Without its rows (None) or results, an object the index did not describe is stale.
+                stale = (results is None or passes is None) and not described
                 if described and changed is not None:
                     delta.append(state.norad)
                     if results is not None:
@@ -400,7 +402,7 @@ class CatalogIndex:
                     pass_rows += [_pass_values(row) for row in changed]
                 else:
                     (keep if results is None and not stale else drop).append(state.norad)
-                    pass_rows += [_pass_values(row) for row in passes]
+                    pass_rows += [_pass_values(row) for row in passes or ()]
                 # -1 never matches a file: a stale object is read again from its file.
                 ino = -1 if stale else state.ino
                 objects.append((state.norad, ino, state.size, state.mtime_ns, state.status, state.error, name, cospar))

@@ -169,7 +169,7 @@ def _prestage(objects_dir: Path, staging_dir: Path, shown: str, sha: str, passes
             except Exception:  # noqa: BLE001 - the commit stages this object itself and reports what is wrong
                 continue
             for item in transaction.hand_over():
-                prepared[norad] = item
+                prepared[norad] = item.without_unchanged_rows()
     return prepared
 
 
