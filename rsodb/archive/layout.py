@@ -109,7 +109,7 @@ SAMPLE_UNITS = {
 }
 
 # Table columns: a numpy dtype, or TEXT for UTF-8 text. Text is stored as fixed-length bytes
-# sized to the longest value of each table, inline in the table's chunk, so the table's Fletcher32
+# sized to the longest value of each table (see text_table), inline in the table's chunk, so the table's Fletcher32
 # checksum covers it (HDF5's variable-length strings live in a heap no checksum covers).
 TEXT = "text"
 # Text columns of the tables rewritten at every commit are padded to a multiple of this width.
