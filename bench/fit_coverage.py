@@ -102,19 +102,22 @@ def config_record(
     }
 
 
-def cycles_config(axis: str, steps: int, walkers: int, until_converged: bool, time_limit_s: float) -> dict:
+def cycles_config(axis: str, args) -> dict:
     """The fit of a Cycles-rendered pass: the paper's mesh from its file, the spin axis it was rendered with."""
     return {
         "name": "cycles",
         "band_draws": 0,
         "model": {"mesh": str(PAPER_OBJ), "materials": str(PAPER_MATERIALS), "spin_axis": axis, "n_sub": 1},
+        "data": {"max_points": args.max_points},
         "parameters": CYCLES_PRIORS,
         "sampler": {
-            "n_walkers": walkers,
-            "n_steps": steps,
-            "until_converged": until_converged,
-            "time_limit_s": time_limit_s,
+            "n_walkers": args.walkers,
+            "n_steps": args.steps,
+            "until_converged": args.until_converged,
+            "time_limit_s": args.time_limit_s,
             "search_points": 120,
+            "search_popsize": args.search_popsize,
+            "search_maxiter": args.search_maxiter,
         },
     }
 
@@ -423,10 +426,7 @@ def run_cycles(args, argv) -> int:
     if args.at_truth:
         return forward_model_at_truth(directory, records, argv, args.no_record)
     started = time.perf_counter()
-    configs = [
-        cycles_config(record["axis"], args.steps, args.walkers, args.until_converged, args.time_limit_s)
-        for record in records
-    ]
+    configs = [cycles_config(record["axis"], args) for record in records]
     # Each finished fit is appended to a journal at once, so a run that is stopped keeps its fits and
     # the next run with the same settings fits only the passes still missing.
     journal = directory / "recoveries.jsonl"
@@ -489,6 +489,9 @@ def run_cycles(args, argv) -> int:
     cycles = records[0]["cycles"]
     worst95 = min(table95[n] for n in names)
     worst_bias = max(abs(bias[n]) for n in names)
+    limits = f", at most {args.max_points} points (consecutive exposures binned)" if args.max_points else ""
+    if args.time_limit_s:
+        limits += f", each fit stopped after {args.time_limit_s:.0f} s (search included)"
     section = f"""
 ## Fit coverage on Cycles-rendered passes ({today()}, bench/fit_coverage.py --cycles)
 
@@ -502,7 +505,8 @@ P_pr 600-3000 s, cone 0-45 deg, phases uniform), spin axis body x (end over end,
 the footprint, {cycles["samples_per_px"]} samples/px in two seeds, {cycles["terminator"]}; its measured noise
 {np.median([r["cycles"]["noise_mag_rms"] for r in records]):.4f} mag RMS per frame (median over passes; max
 {max(r["cycles"]["noise_mag_max"] for r in records):.4f}). Fit: jitter free on 0-0.1 mag, {args.walkers} walkers,
-{args.steps} steps{" until converged (at most)" if args.until_converged else ""}, global search first{f", sampling stopped after {args.time_limit_s:.0f} s per fit" if args.time_limit_s else ""}. The fits took
+{args.steps} steps{" until converged (at most)" if args.until_converged else ""}, global search first (population
+{args.search_popsize} per parameter, {args.search_maxiter} generations){limits}. The fits took
 {fit_minutes:.0f} min together, {elapsed / 60:.0f} min of wall time on {os.cpu_count()} cores in the last run (load average
 {load[0]:.1f} at the end).
 
@@ -590,8 +594,16 @@ def main(argv=None) -> int:
     )
     cycles.add_argument("--cycles-resolution", type=int, default=128, help="Cycles px across the footprint")
     cycles.add_argument("--cycles-samples", type=int, default=16, help="Cycles samples per pixel")
+    cycles.add_argument(
+        "--max-points",
+        type=int,
+        default=0,
+        help="fit at most this many points, binning consecutive exposures (default 0: all 600)",
+    )
     cycles.add_argument("--until-converged", action="store_true", help="sample until converged (--steps caps it)")
-    cycles.add_argument("--time-limit-s", type=float, default=0.0, help="stop each fit's sampling after this")
+    cycles.add_argument(
+        "--time-limit-s", type=float, default=0.0, help="stop each fit after this (its search included)"
+    )
     cycles.add_argument("--seed", type=int, default=0, help="seeds the truths, noise and Cycles")
     args = parser.parse_args(argv)
     if args.cycles:
