@@ -72,7 +72,7 @@ def build(path: Path, n_objects: int, n_passes: int, processes: int) -> float:
 def _night_files(args) -> int:
     from rsodb.samples.synthetic import write_synthetic_corpus
 
-    directory, n_files, seed, indices, night_utc = args
+    directory, n_files, seed, indices, night_utc, first_norad = args
     return len(
         write_synthetic_corpus(
             directory,
@@ -80,19 +80,25 @@ def _night_files(args) -> int:
             FILE_POINTS,
             n_files,
             seed=seed,
-            first_norad=FIRST_NORAD,
+            first_norad=first_norad,
             indices=indices,
             first_utc=night_utc,
         )
     )
 
 
-def write_night(directory: Path, n_files: int, seed: int, night_utc: str, processes: int) -> None:
-    """One new pass for each of `n_files` objects on the night of `night_utc` (after every stored pass)."""
+def write_night(
+    directory: Path, n_files: int, seed: int, night_utc: str, processes: int, first_norad: int = FIRST_NORAD
+) -> None:
+    """One new pass for each of `n_files` objects from `first_norad` on, on the night of `night_utc`
+    (after every stored pass)."""
     from concurrent.futures import ProcessPoolExecutor
 
     step = -(-n_files // (4 * processes))
-    pieces = [(directory, n_files, seed, range(i, min(i + step, n_files)), night_utc) for i in range(0, n_files, step)]
+    pieces = [
+        (directory, n_files, seed, range(i, min(i + step, n_files)), night_utc, first_norad)
+        for i in range(0, n_files, step)
+    ]
     with ProcessPoolExecutor(processes) as pool:
         assert sum(pool.map(_night_files, pieces)) == n_files
 
@@ -172,6 +178,15 @@ def in_process(mode: str, archive: Path, corpus: Path | str = "") -> dict:
     return json.loads(output.splitlines()[-1])
 
 
+def passes_per_object(path: Path, first_norad: int, count: int) -> float:
+    """Mean number of passes stored for objects `first_norad` .. `first_norad + count - 1`."""
+    from rsodb.archive import Archive
+
+    frame = Archive(path).catalog(all_versions=True)
+    counts = frame["norad"].value_counts()
+    return float(np.mean([counts.get(norad, 0) for norad in range(first_norad, first_norad + count)]))
+
+
 def targets_of(path: Path) -> tuple[str, str]:
     """An object in the middle of the archive and its first pass id."""
     from rsodb.archive import Archive
@@ -234,13 +249,18 @@ def run(n_objects: int, n_passes: int, ingest_files: int, repeats: int, director
     rows = {which: in_process("survey", paths[which])["rows"] for which in paths}
 
     # Ingest of a night: one new file per object, into the big archive and into an empty one.
+    # Each night goes to the next `ingest_files` objects, so that runs of the bench do not pile
+    # nights onto the same objects (a commit's cost grows with its object's file).
     ingest_rates = {"big": [], "empty": []}
+    stored_before = []  # passes stored per object of the night, before it
     with tempfile.TemporaryDirectory(prefix="rsodb-night-", dir=directory) as tmp:
         for repeat in range(repeats):
             night = Path(tmp) / f"night-{repeat}"
             nights_before = len(list(directory.glob("nights-*"))) * repeats + repeat
             night_utc = str(np.datetime64("2026-01-01T18:00") + np.timedelta64(nights_before, "D"))
-            write_night(night, ingest_files, SEED + nights_before, night_utc, processes)
+            first = FIRST_NORAD + (nights_before * ingest_files) % max(1, n_objects - ingest_files + 1)
+            write_night(night, ingest_files, SEED + nights_before, night_utc, processes, first)
+            stored_before.append(passes_per_object(big, first, ingest_files))
             empty = Path(tmp) / f"empty-{repeat}"
             for which, target in (("big", big), ("empty", empty)):
                 result = in_process("ingest", target, night)
@@ -259,6 +279,7 @@ def run(n_objects: int, n_passes: int, ingest_files: int, repeats: int, director
         "times": times,
         "survey_rows": rows,
         "ingest_files_per_s": ingest_rates,
+        "night_objects_passes_before": stored_before,
         "archive_mib": sum(p.stat().st_size for p in (big / "objects").glob("*.h5")) / 2**20,
     }
 
@@ -315,7 +336,9 @@ def report(result: dict) -> str:
         "",
         f"The survey query (period {SURVEY['period_min']:g}-{SURVEY['period_max']:g} s, verdict "
         f"{SURVEY['verdict']}) selects {result['survey_rows']['big']} of {result['passes']} passes. Ingest of a "
-        f"night ({result['ingest_files']} new {result['file_points']}-row ccd_phot files, one per object): "
+        f"night ({result['ingest_files']} new {result['file_points']}-row ccd_phot files, one per object, "
+        f"each night the next {result['ingest_files']} objects; they held "
+        f"{', '.join(f'{n:.1f}' for n in result['night_objects_passes_before'])} passes each before it): "
         f"{rates['big']:.0f} files/s into the big archive, {rates['empty']:.0f} files/s into an empty one "
         f"(ratio {rates['big'] / rates['empty']:.2f}); target >= {TARGETS['ingest_files_per_s']:.0f} files/s.",
         "",
