@@ -343,7 +343,13 @@ def _copy(norad: int, final: Path, tmp: Path) -> ObjectState | None:
 
 
 def _table_bytes(file: h5py.File, name: str) -> int:
-    return int(file[name].id.get_storage_size()) if name in file else 0
+    if not file.id.links.exists(name.encode()):
+        return 0
+    return int(h5py.h5d.open(file.id, name.encode()).get_storage_size())
+
+
+def _freed_bytes(file: h5py.File) -> int:
+    return int(layout.get_attrs(file, ["freed_bytes"]).get("freed_bytes", 0))
 
 
 def _repacked(source: h5py.File, tmp: Path) -> h5py.File:
@@ -431,7 +437,7 @@ def stage_files(transaction: ObjectTransaction, norad: int, files: Sequence[Pend
         passes_group = file.require_group("passes")
         for pass_, metadata in to_write:
             layout.write_pass(passes_group, pass_, metadata)
-        freed = int(file.attrs.get("freed_bytes", 0)) + _table_bytes(file, "catalog")
+        freed = _freed_bytes(file) + _table_bytes(file, "catalog")
         layout.write_catalog(file, rows)
         if len(duplicates) != len(current.duplicates):
             freed += _table_bytes(file, "duplicates")
@@ -480,7 +486,7 @@ def stage_results(transaction: ObjectTransaction, norad: int, entries: Iterable[
     now = utc_now()
 
     def build(file: h5py.File) -> None:
-        freed = int(file.attrs.get("freed_bytes", 0))
+        freed = _freed_bytes(file)
         for pass_id, kind, name, result in entries:
             kind_group = file["passes"][pass_id].require_group(kind)
             if name in kind_group:

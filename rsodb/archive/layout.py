@@ -413,7 +413,8 @@ def _create_table(group: h5py.Group, name: str, table: np.ndarray) -> None:
         plist.set_chunk((len(table),))
         plist.set_fletcher32()
     dataset = h5py.h5d.create(group.id, name.encode(), type_id, h5py.h5s.create_simple(table.shape), plist)
-    dataset.write(h5py.h5s.ALL, h5py.h5s.ALL, table)
+    # The cached type as the memory type too: without it h5py builds the compound type again.
+    dataset.write(h5py.h5s.ALL, h5py.h5s.ALL, table, type_id)
 
 
 def write_pass(passes_group: h5py.Group, pass_: Pass, metadata: dict) -> None:
@@ -529,14 +530,19 @@ def read_pass(group: h5py.Group, superseded_by: str | None = None) -> StoredPass
 
 
 # -- tables --------------------------------------------------------------------------------
+def _has(node: h5py.Group, name: str) -> bool:
+    """``name in node`` for a plain name, without h5py's high-level path handling."""
+    return node.id.links.exists(name.encode())
+
+
 def _replace_table(file: h5py.File, name: str, table: np.ndarray) -> None:
-    if name in file:
-        del file[name]
+    if _has(file, name):
+        file.id.unlink(name.encode())
     _create_table(file, name, table)
 
 
 def _read_table(file: h5py.File, name: str) -> np.ndarray | None:
-    if name not in file:
+    if not _has(file, name):
         return None
     try:
         return read_table(file, name)
