@@ -29,6 +29,7 @@ saturated frame.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+import functools
 import re
 from types import MappingProxyType
 
@@ -197,10 +198,7 @@ class CcdPhotReader:
         """Build the pass from an already loaded file."""
         header = _parse_header(text)
         # Messages name the columns as this file labels them (magV, Rg(Mm), ...).
-        columns = tuple(
-            replace(c, label=label)
-            for c, label in zip(UT_COLUMNS if header.variant == "ut" else JD_COLUMNS, header.labels)
-        )
+        columns = _labelled_columns(header.variant, tuple(header.labels))
         exposure_s = _exposure(text, header)
         time_format = header.keys.get("Time_format", (None, None))
         _check_time_format_variant(text, header, time_format)
@@ -285,6 +283,12 @@ class CcdPhotReader:
 
 
 # -- header --------------------------------------------------------------------------------
+@functools.lru_cache(maxsize=64)
+def _labelled_columns(variant: str, labels: tuple[str, ...]) -> tuple[Column, ...]:
+    """The columns of a variant named as a file labels them (a few label sets recur across files)."""
+    return tuple(replace(c, label=label) for c, label in zip(UT_COLUMNS if variant == "ut" else JD_COLUMNS, labels))
+
+
 def _parse_header(text: TextFile) -> _Header:
     header = _Header()
     number = 0

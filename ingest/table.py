@@ -175,6 +175,8 @@ class RowFlags:
 
     def flag(self, bad: np.ndarray, reasons) -> None:
         """Set aside the rows where `bad` is True; `reasons(i)` words the reason for row i."""
+        if not bad.any():  # the common case: a check that every row passes
+            return
         for i in np.flatnonzero(bad).tolist():
             if i not in self._reasons:
                 self._reasons[i] = reasons(i)
