@@ -44,7 +44,7 @@ from rsodb.archive.commits import ObjectTransaction, stage_files
 from rsodb.archive.discovery import find_observation_files
 from rsodb.archive.ingest_report import CommitEvent, IngestReport, IngestWarning, PendingFile
 from rsodb.archive.locking import ObjectLock
-from rsodb.pool import default_processes
+from rsodb.pool import ingest_readers
 
 if TYPE_CHECKING:
     from rsodb.archive.store import Archive
@@ -199,7 +199,7 @@ def _staging_directory(archive_path: Path):
 def _auto_workers(n_files: int) -> int:
     if n_files < _MIN_FILES_FOR_POOL:
         return 0
-    return max(1, min(default_processes(), 8))
+    return min(ingest_readers(), 8)
 
 
 def with_elements(pass_: Pass, catalogue: ElementCatalogue | None, max_age_days: float) -> tuple[Pass, str]:
@@ -292,8 +292,8 @@ def run_ingest(
     present: list[str] = []
     ingested, duplicates, warnings = [], [], []
     known = frozenset(archive.known_sha256())
-    # More readers than cores only adds contention (and a huge number would exhaust the machine).
-    workers = _auto_workers(len(files)) if workers is None else min(workers, default_processes())
+    # More readers than that only adds contention (and a huge number would exhaust the machine).
+    workers = _auto_workers(len(files)) if workers is None else min(workers, ingest_readers())
 
     with ExitStack() as stack:
         staging = stack.enter_context(_staging_directory(archive.path)) if workers else None

@@ -85,16 +85,18 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _workers(requested: int | None) -> int | None:
-    """The reader processes to use: more than the usable cores are not started (a note says so)."""
+    """The reader processes to use: more than one per usable core and one are not started (a note
+    says so)."""
     if requested is None:
         return None
     if requested < 0:
         raise ValueError(f"--workers {requested} must be 0 or more (0 reads in this process)")
-    cores = rsodb.pool.default_processes()
-    if requested > cores:
+    limit = rsodb.pool.ingest_readers()
+    if requested > limit:
         print(
-            f"rsodb ingest: note: --workers {requested} is more than the {cores} usable CPUs; using {cores}",
+            f"rsodb ingest: note: --workers {requested} is more than the {limit - 1} usable CPUs can use; "
+            f"using {limit}",
             file=sys.stderr,
         )
-        return cores
+        return limit
     return requested
