@@ -86,6 +86,8 @@ def imap_in_pool(
     processes = default_processes() if processes is None else int(processes)
     if processes < 1:
         raise ValueError(f"processes={processes!r} must be at least 1")
+    if not items:  # nothing to do: no bar (and none of tqdm's imports, 50 ms)
+        return
     # tqdm.auto loads asyncio; the archive's commands import this module for default_processes
     # alone and should not load it at start-up (bench/archive_scale.py times their start-up).
     from tqdm.auto import tqdm
