@@ -342,12 +342,6 @@ def _copy(norad: int, final: Path, tmp: Path) -> ObjectState | None:
     return ObjectState.of(norad, stat)
 
 
-def _table_bytes(file: h5py.File, name: str) -> int:
-    if not file.id.links.exists(name.encode()):
-        return 0
-    return int(h5py.h5d.open(file.id, name.encode()).get_storage_size())
-
-
 def _freed_bytes(file: h5py.File) -> int:
     return int(layout.get_attrs(file, ["freed_bytes"]).get("freed_bytes", 0))
 
@@ -437,10 +431,10 @@ def stage_files(transaction: ObjectTransaction, norad: int, files: Sequence[Pend
         passes_group = file.require_group("passes")
         for pass_, metadata in to_write:
             layout.write_pass(passes_group, pass_, metadata)
-        freed = _freed_bytes(file) + _table_bytes(file, "catalog")
+        freed = _freed_bytes(file) + layout.table_bytes(file, "catalog")
         layout.write_catalog(file, rows)
         if len(duplicates) != len(current.duplicates):
-            freed += _table_bytes(file, "duplicates")
+            freed += layout.table_bytes(file, "duplicates")
             layout.write_duplicates(file, duplicates)
         if "results" not in file and current.before is not None and current.results:
             layout.write_results(file, current.results)  # a schema-1 file: its results get their table
@@ -498,7 +492,7 @@ def stage_results(transaction: ObjectTransaction, norad: int, entries: Iterable[
             result.to_hdf5(group)
             attrs = seal_result(group)
             results[(pass_id, kind, name)] = layout.result_summary(pass_id, kind, name, group, attrs)
-        freed += _table_bytes(file, "results")
+        freed += layout.table_bytes(file, "results")
         layout.write_results(file, sorted(results.values(), key=lambda item: (item.pass_id, item.kind, item.name)))
         file.attrs["freed_bytes"] = freed
 
@@ -535,7 +529,7 @@ def stage_metadata(
     def build(file: h5py.File) -> None:
         for pass_id, metadata in updated.items():
             layout.rewrite_metadata(file["passes"][pass_id], metadata)
-        file.attrs["freed_bytes"] = int(file.attrs.get("freed_bytes", 0)) + _table_bytes(file, "catalog")
+        file.attrs["freed_bytes"] = _freed_bytes(file) + layout.table_bytes(file, "catalog")
         layout.write_catalog(file, rows)
 
     transaction.finish(norad, current, build, _object_names(current, []), rows, None, current.duplicates)

@@ -535,6 +535,13 @@ def _has(node: h5py.Group, name: str) -> bool:
     return node.id.links.exists(name.encode())
 
 
+def table_bytes(file: h5py.File, name: str) -> int:
+    """Bytes stored for the table ``file[name]`` (0 when there is none)."""
+    if not _has(file, name):
+        return 0
+    return int(h5py.h5d.open(file.id, name.encode()).get_storage_size())
+
+
 def _replace_table(file: h5py.File, name: str, table: np.ndarray) -> None:
     if _has(file, name):
         file.id.unlink(name.encode())
