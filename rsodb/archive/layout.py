@@ -390,8 +390,11 @@ def get_attrs(node: h5py.HLObject, names) -> dict:
         data = np.empty(attr.shape, dtype=dtype)
         attr.read(data, memory_type)
         value = data[()]
-        if isinstance(value, bytes) and h5py.check_string_dtype(attr.dtype) is not None:
-            value = value.decode(h5py.check_string_dtype(attr.dtype).encoding)
+        if isinstance(value, bytes):
+            # The cached dtype's string info (``attr.dtype`` derives a new dtype, ~0.05 ms).
+            string = h5py.check_string_dtype(dtype)
+            if string is not None:
+                value = value.decode(string.encoding)
         found[name] = value
     return found
 
