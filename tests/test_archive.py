@@ -18,6 +18,7 @@ import pytest
 import ingest
 from ingest.observation import ARRAY_FIELDS
 from rsodb.archive import Archive, StoredPass, UnknownPassError, layout
+from rsodb.archive.index import StoredSources
 from rsodb.archive.locking import ObjectLock
 from rsodb.samples.synthetic import synthetic_pass
 from tests.conftest import COSMOS2540_PHV, COSMOS2553_PHC, PROJECT_ROOT, REAL_FILES, TOPEX_PHV
@@ -419,6 +420,27 @@ def test_process_pool_gives_the_same_archive(tmp_path, shared_data):
     for a, b in zip(serial.passes(), pooled.passes()):
         assert a.pass_id == b.pass_id
         assert_same_pass(b, a)
+
+
+def test_stored_sources_answer_from_the_index_in_other_processes(real_archive, tmp_path):
+    """The readers of an ingest ask the index whether a file is stored, one hash at a time."""
+    import pickle
+
+    stored = {row.source_sha256 for row in real_archive.summaries()}
+    sources = pickle.loads(pickle.dumps(real_archive.stored_sources()))  # as a reader receives it
+    assert len(pickle.dumps(sources)) < 1000  # the path, not the hashes
+    assert stored and all(sha in sources for sha in stored)
+    assert "0" * 64 not in sources and next(iter(stored)).upper() not in sources
+    assert Archive(tmp_path / "empty").stored_sources() == frozenset()  # nothing stored: no hashing first
+    damaged = tmp_path / layout.INDEX_NAME
+    damaged.write_bytes(b"not SQLite")  # unreadable: "not stored", and the commit decides
+    assert next(iter(stored)) not in StoredSources(damaged)
+
+
+def test_a_pooled_reingest_finds_every_file_stored(real_archive):
+    report = real_archive.ingest(REAL_FILES, progress=False, workers=2)
+    assert report.ok and not report.ingested
+    assert sorted(report.already_present) == sorted(str(path) for path in REAL_FILES)
 
 
 def test_a_damaged_object_file_is_named_and_the_others_are_listed(real_archive):

@@ -19,7 +19,7 @@ objects grow), and whenever the passes waiting in memory exceed `_MAX_PENDING_BY
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Container
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import ExitStack, contextmanager
 import hashlib
@@ -64,12 +64,15 @@ _SOLE_SHARE_FOR_STAGING = 0.5
 _reader: dict = {}
 
 
-def _init_worker(known_sha256: frozenset[str], options: tuple) -> None:
+def _init_worker(known_sha256: Container[str], options: tuple) -> None:
     _reader.update(known=known_sha256, options=options)
 
 
-def read_observation_file(path: str, known_sha256: frozenset[str] = frozenset()):
+def read_observation_file(path: str, known_sha256: Container[str] = frozenset()):
     """Read one file for ingest.
+
+    `known_sha256` holds the hashes of stored files (a set, or `rsodb.archive.index.StoredSources`);
+    an empty one (nothing stored) spares the hashing before the parse.
 
     Returns
     -------
@@ -120,7 +123,7 @@ NO_ELEMENTS = (
 )
 
 
-def _read_for_ingest(path: str, known: frozenset[str], options: tuple, stage_in: tuple[Path, Path] | None):
+def _read_for_ingest(path: str, known: Container[str], options: tuple, stage_in: tuple[Path, Path] | None):
     """Read one file, give its passes their orbital elements (or the note why not) and, given
     ``stage_in = (objects_dir, staging_dir)``, stage each of its objects' next file.
 
@@ -236,7 +239,7 @@ def file_warnings(path: str, passes: tuple[Pass, ...]) -> list[IngestWarning]:
 
 
 def _results(
-    files: list[Path], known: frozenset[str], workers: int, options: tuple, stage_in: Callable[[], tuple | None]
+    files: list[Path], known: Container[str], workers: int, options: tuple, stage_in: Callable[[], tuple | None]
 ):
     """Yield read results in file order, reading ahead in `workers` processes (0: in this one,
     staging nothing); each chunk is staged in ``stage_in()`` as it is when the chunk is queued."""
@@ -291,7 +294,7 @@ def run_ingest(
     failed: list[FormatError] = list(problems)
     present: list[str] = []
     ingested, duplicates, warnings = [], [], []
-    known = frozenset(archive.known_sha256())
+    known = archive.stored_sources()
     # More readers than that only adds contention (and a huge number would exhaust the machine).
     workers = _auto_workers(len(files)) if workers is None else min(workers, ingest_readers())
 

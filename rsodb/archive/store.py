@@ -25,7 +25,7 @@ from ingest.elements import DEFAULT_MAX_AGE_DAYS, ElementCatalogue
 from ingest.observation import Pass
 from rsodb.archive import layout
 from rsodb.archive.commits import ObjectTransaction, stage_files, stage_metadata, stage_results, utc_now
-from rsodb.archive.index import CatalogIndex, ObjectState, PassQuery
+from rsodb.archive.index import CatalogIndex, ObjectState, PassQuery, StoredSources
 from rsodb.archive.ingest_report import CommitEvent, IngestReport, PendingFile
 from rsodb.archive.integrity import DamagedObjectError, check_result, open_object
 from rsodb.archive.locking import ObjectLock, remove_abandoned_staging, replacing, stale_temp_files
@@ -230,6 +230,17 @@ class Archive:
         """SHA-256 of every stored file: sources of passes and duplicate sources."""
         self._refresh()
         return self._index.known_sha256()
+
+    def stored_sources(self) -> StoredSources | frozenset[str]:
+        """What `known_sha256` holds, as a container that answers ``sha256 in it``: the index
+        asked hash by hash (cheap to send to other processes), or an empty set when nothing is
+        stored or the index lives in this process's memory (then every hash)."""
+        self._refresh()
+        if not self._index.holds_sources():
+            return frozenset()
+        if self._index.in_memory:
+            return frozenset(self._index.known_sha256())
+        return StoredSources(self._index.path)
 
     def rebuild_index(self) -> int:
         """Read every object file into a fresh index; returns the number of objects indexed."""
