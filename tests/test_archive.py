@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+from pathlib import Path
 import re
 import shutil
 
@@ -441,6 +442,16 @@ def test_a_pooled_reingest_finds_every_file_stored(real_archive):
     report = real_archive.ingest(REAL_FILES, progress=False, workers=2)
     assert report.ok and not report.ingested
     assert sorted(report.already_present) == sorted(str(path) for path in REAL_FILES)
+
+
+def test_a_file_the_stale_index_lists_is_stored_again(real_archive):
+    """The readers trust the index without a sweep; the parent checks a hit against the object file."""
+    (row,) = [row for row in real_archive.summaries() if row.norad == 44517]
+    real_archive.object_path(44517).unlink()  # behind the archive's back: the index still lists it
+    report = real_archive.ingest(REAL_FILES, progress=False, workers=2)
+    assert report.ok and [Path(item.path).name for item in report.ingested] == [row.source_name]
+    assert len(report.already_present) == len(REAL_FILES) - 1
+    assert [summary.source_sha256 for summary in real_archive.summaries(44517)] == [row.source_sha256]
 
 
 def test_a_damaged_object_file_is_named_and_the_others_are_listed(real_archive):

@@ -600,6 +600,15 @@ class CatalogIndex:
             row = self._db.execute("SELECT EXISTS (SELECT 1 FROM passes) OR EXISTS (SELECT 1 FROM sources)").fetchone()
         return bool(row[0])
 
+    def holders(self, sha256: str) -> list[int]:
+        """The objects the index says store a file with this hash (as a pass's source or a duplicate)."""
+        with self.guarded():
+            rows = self._db.execute(
+                "SELECT norad FROM passes WHERE source_sha256 = ?1 UNION SELECT norad FROM sources WHERE sha256 = ?1",
+                (sha256,),
+            ).fetchall()
+        return [row[0] for row in rows]
+
     def known_sha256(self) -> set[str]:
         """Content hashes of every stored file, passes and duplicate sources alike."""
         with self.guarded():

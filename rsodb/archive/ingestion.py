@@ -341,6 +341,9 @@ def run_ingest(
         ):
             bar.update(1)
             shown = printable_path(path)
+            if error is None and passes is None and not archive.is_stored(sha):
+                # The index listed the file's hash but no object file holds it now: read it here.
+                path, sha, passes, error, prepared = _read_for_ingest(path, frozenset(), options, None)
             if error is not None:
                 failed.append(error)
             elif passes is None or sha in pending_sha:

@@ -25,7 +25,7 @@ from ingest.elements import DEFAULT_MAX_AGE_DAYS, ElementCatalogue
 from ingest.observation import Pass
 from rsodb.archive import layout
 from rsodb.archive.commits import ObjectTransaction, stage_files, stage_metadata, stage_results, utc_now
-from rsodb.archive.index import CatalogIndex, ObjectState, PassQuery, StoredSources
+from rsodb.archive.index import CatalogIndex, DamagedIndexError, ObjectState, PassQuery, StoredSources
 from rsodb.archive.ingest_report import CommitEvent, IngestReport, PendingFile
 from rsodb.archive.integrity import DamagedObjectError, check_result, open_object
 from rsodb.archive.locking import ObjectLock, remove_abandoned_staging, replacing, stale_temp_files
@@ -232,15 +232,28 @@ class Archive:
         return self._index.known_sha256()
 
     def stored_sources(self) -> StoredSources | frozenset[str]:
-        """What `known_sha256` holds, as a container that answers ``sha256 in it``: the index
-        asked hash by hash (cheap to send to other processes), or an empty set when nothing is
-        stored or the index lives in this process's memory (then every hash)."""
-        self._refresh()
+        """What the index says `known_sha256` holds, as a container that answers ``sha256 in it``
+        (the index asked hash by hash, cheap to send to other processes; an empty set when the
+        index holds nothing). The index is not swept first (on a large archive that stats every
+        object file): a hash it lists may be gone from a file changed behind its back, so confirm
+        a hit with `is_stored`; a hash it lacks is at worst read and found again by its commit."""
+        if self._index.in_memory:
+            return frozenset(self.known_sha256())
         if not self._index.holds_sources():
             return frozenset()
-        if self._index.in_memory:
-            return frozenset(self._index.known_sha256())
         return StoredSources(self._index.path)
+
+    def is_stored(self, sha256: str) -> bool:
+        """Whether a file with this content is stored (a pass's source or a duplicate source),
+        checked against the files of the objects the index names."""
+        try:
+            holders = self._index.holders(sha256)
+            if not holders:
+                return False
+            self._refresh(holders)
+            return bool(self._index.holders(sha256))
+        except (DamagedIndexError, TimeoutError):
+            return False  # the file is read and its commit decides
 
     def rebuild_index(self) -> int:
         """Read every object file into a fresh index; returns the number of objects indexed."""
