@@ -255,20 +255,25 @@ def _results(
     # Spawned, not forked: a fork taken while another thread of this process holds a lock (an
     # Embree or BLAS pool, a logging handler) can leave the reader waiting on it forever.
     context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(
+    pool = ProcessPoolExecutor(
         max_workers=workers, mp_context=context, initializer=_init_worker, initargs=(known, options)
-    ) as pool:
-        queued = deque()
-        next_chunk = 0
-        try:
-            while queued or next_chunk < len(chunks):
-                while len(queued) < window and next_chunk < len(chunks):
-                    queued.append(pool.submit(_read_chunk, chunks[next_chunk], stage_in()))
-                    next_chunk += 1
-                yield from queued.popleft().result()
-        finally:
-            for future in queued:
-                future.cancel()
+    )
+    queued = deque()
+    next_chunk = 0
+    every_chunk_read = False
+    try:
+        while queued or next_chunk < len(chunks):
+            while len(queued) < window and next_chunk < len(chunks):
+                queued.append(pool.submit(_read_chunk, chunks[next_chunk], stage_in()))
+                next_chunk += 1
+            yield from queued.popleft().result()
+        every_chunk_read = True
+    finally:
+        for future in queued:
+            future.cancel()
+        # With every chunk read the readers only have to exit (~0.35 s), which they do while the
+        # last commit runs; stopped early, wait until none still writes into the staging directory.
+        pool.shutdown(wait=not every_chunk_read)
 
 
 def run_ingest(
