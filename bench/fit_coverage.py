@@ -433,6 +433,12 @@ def run_cycles(args, argv) -> int:
     done = load_journal(journal, records, configs)
     if done:
         print(f"{len(done)} of {len(records)} passes already fitted with these settings ({journal})")
+    rendered = len(records)
+    if args.journal_only:
+        records = [record for record in records if int(record["index"]) in done]
+        if not records:
+            print(f"no pass is fitted with these settings yet ({journal}); run without --journal-only", file=sys.stderr)
+            return 1
     with tempfile.TemporaryDirectory() as scratch:
         tasks = [
             (str(directory), record, config, scratch, str(directory / "shapes"))
@@ -495,7 +501,7 @@ def run_cycles(args, argv) -> int:
     section = f"""
 ## Fit coverage on Cycles-rendered passes ({today()}, bench/fit_coverage.py --cycles)
 
-{len(records)} passes rendered by **Blender Cycles** (`raycast.cycles`) from the published workflow's own COSMOS
+{len(records)} passes{f" (of {rendered} rendered; the others not fitted yet)" if len(records) < rendered else ""} rendered by **Blender Cycles** (`raycast.cycles`) from the published workflow's own COSMOS
 2502 mesh and materials, fitted with the project's cached renderer of that mesh (no inverse crime:
 the data are not the fit's own model). 120 s windows of real COSMOS 2502 passes over Derenivka (TLE
 epoch 2024-01-09; sunlit, elevation > 25 deg, Sun below -8 deg), 5 fps, 0.2 s exposures (600 samples),
@@ -587,6 +593,11 @@ def main(argv=None) -> int:
     cycles.add_argument("--cycles", action="store_true", help="passes rendered by Blender Cycles from the paper mesh")
     cycles.add_argument("--passes-dir", default=str(PASSES_DIR), help=f"rendered passes (default {PASSES_DIR})")
     cycles.add_argument("--render-only", action="store_true", help="render the passes, fit nothing")
+    cycles.add_argument(
+        "--journal-only",
+        action="store_true",
+        help="report the passes already fitted with these settings (the journal), fit nothing",
+    )
     cycles.add_argument(
         "--at-truth",
         action="store_true",
