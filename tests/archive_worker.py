@@ -45,9 +45,9 @@ def run_ingest(args) -> int:
     archive = Archive(args.archive)
     commit_many = archive.commit_many
 
-    def announced_commit_many(batches):
+    def announced_commit_many(batches, *rest, **options):
         say("BEGIN " + " ".join(str(norad) for norad in sorted(batches)))
-        result = commit_many(batches)
+        result = commit_many(batches, *rest, **options)
         time.sleep(args.commit_pause)
         return result
 

@@ -388,6 +388,21 @@ def test_stale_temp_files_are_removed_unless_their_writer_is_alive(real_archive)
     assert len(reopened.passes()) == 5  # temp files are never read as passes
 
 
+def test_a_commit_removes_what_a_killed_writer_of_its_object_left(tmp_path, shared_data):
+    """Temporary files left after the archive was opened go when their object is next committed
+    (listed once per ingest run, whatever its number of commit rounds)."""
+    archive = Archive(tmp_path / "archive")
+    archive.ingest([COSMOS2540_PHV], progress=False, workers=0)
+    left = archive.objects_dir / ".44517.h5.4242.deadbeef.tmp"
+    other = archive.objects_dir / ".22076.h5.4242.deadbeef.tmp"
+    left.write_bytes(b"half an HDF5 file")
+    other.write_bytes(b"half an HDF5 file")
+    source = tmp_path / "copy.phV"
+    source.write_bytes(COSMOS2540_PHV.read_bytes().replace(b"\n", b"\r\n"))  # new bytes, same pass
+    assert archive.ingest([source], progress=False, workers=0).ok
+    assert not left.exists() and other.exists()  # 22076 was not committed, so it was not locked
+
+
 def test_add_in_memory_passes(tmp_path):
     rng = np.random.default_rng(7)
     made = [

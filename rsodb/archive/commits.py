@@ -37,7 +37,15 @@ from rsodb.archive.locking import ObjectLock, publish, stale_temp_files, temp_pa
 from rsodb.archive.stored import DuplicateSource, PassSummary, ResultSummary
 from rsodb.storage import attr_text
 
-__all__ = ["Staged", "ObjectTransaction", "stage_files", "stage_results", "stage_metadata", "utc_now"]
+__all__ = [
+    "Staged",
+    "ObjectTransaction",
+    "stage_files",
+    "stage_results",
+    "stage_metadata",
+    "utc_now",
+    "list_temp_names",
+]
 
 # Rewrite an object file from scratch (instead of copying its bytes) once the space left behind
 # by replaced tables and results exceeds this share of the file.
@@ -143,6 +151,10 @@ class ObjectTransaction:
     lock_timeout_s : float or None
     temp_dir : Path or None
         Where next files are written (default: beside the object files); on the same file system.
+    temp_names : set of str or None
+        Names of temporary files in `objects_dir` that killed writers may have left, listed once
+        and shared by the transactions of one run (listing 20,000 objects' directory costs ~0.1 s);
+        default: listed when the first lock is taken. Each is removed once its object is locked.
     """
 
     objects_dir: Path
@@ -151,8 +163,8 @@ class ObjectTransaction:
     lock_timeout_s: float | None = 600.0
     temp_dir: Path | None = None
     staged: list[Staged] = field(default_factory=list)
+    temp_names: set[str] | None = None
     _stack: ExitStack = field(default_factory=ExitStack)
-    _temp_names: set[str] | None = None
     _locked: int = 0
 
     def __enter__(self) -> ObjectTransaction:
@@ -169,14 +181,14 @@ class ObjectTransaction:
         lock.acquire()
         self._stack.callback(lock.release)
         self._locked += 1
-        # Temporary files of killed writers of this object: listed once per round (a directory of
-        # 20,000 objects costs milliseconds to list); any writer that held this lock is done by now.
-        if self._temp_names is None:
-            self._temp_names = {path.name for path in stale_temp_files(self.objects_dir, "")}
+        # Temporary files of killed writers of this object (any writer that held this lock is done
+        # by now). One that appeared after the listing is left for the next run or Archive().
+        if self.temp_names is None:
+            self.temp_names = list_temp_names(self.objects_dir)
         prefix = f".{layout.object_file_name(norad)}."
-        for name in [name for name in self._temp_names if name.startswith(prefix)]:
+        for name in [name for name in self.temp_names if name.startswith(prefix)]:
             (self.objects_dir / name).unlink(missing_ok=True)
-            self._temp_names.discard(name)
+            self.temp_names.discard(name)
 
     def _temp_path(self, final: Path) -> Path:
         tmp = temp_path(final)
@@ -317,6 +329,11 @@ class ObjectTransaction:
         except sqlite3.Error:
             pass  # the files are committed; the index sees they changed and reads them again
         return staged
+
+
+def list_temp_names(objects_dir: Path) -> set[str]:
+    """The names of every writer's temporary files in `objects_dir` (see `ObjectTransaction.temp_names`)."""
+    return {path.name for path in stale_temp_files(objects_dir, "")}
 
 
 def _first_line(exc: BaseException) -> str:

@@ -40,7 +40,7 @@ from ingest.problems import FileWarning
 from ingest.readers import read_file
 from ingest.textfile import open_regular_file
 from rsodb.archive import layout
-from rsodb.archive.commits import ObjectTransaction, stage_files
+from rsodb.archive.commits import ObjectTransaction, list_temp_names, stage_files
 from rsodb.archive.discovery import find_observation_files
 from rsodb.archive.ingest_report import CommitEvent, IngestReport, IngestWarning, PendingFile
 from rsodb.archive.locking import ObjectLock
@@ -306,6 +306,7 @@ def run_ingest(
     with ExitStack() as stack:
         staging = stack.enter_context(_staging_directory(archive.path)) if workers else None
         stage_in = (archive.objects_dir, staging)
+        temp_names = list_temp_names(archive.objects_dir)  # once, not once per round
         pending: dict[int, list[PendingFile]] = {}
         pending_sha: set[str] = set()
         pending_bytes = 0
@@ -316,7 +317,7 @@ def run_ingest(
         def commit_pending() -> None:
             nonlocal pending_bytes, last_commit_end, last_commit_cost, prestaging
             began = time.monotonic()
-            events, failures = archive.commit_many(pending)
+            events, failures = archive.commit_many(pending, temp_names)
             for event in events:
                 ingested.extend(event.ingested)
                 present.extend(event.already_present)

@@ -147,8 +147,10 @@ class Archive:
                 finally:
                     lock.release()
 
-    def _transaction(self) -> ObjectTransaction:
-        return ObjectTransaction(self.objects_dir, self._index, self.durable, self.lock_timeout_s)
+    def _transaction(self, temp_names: set[str] | None = None) -> ObjectTransaction:
+        return ObjectTransaction(
+            self.objects_dir, self._index, self.durable, self.lock_timeout_s, temp_names=temp_names
+        )
 
     # -- the index ------------------------------------------------------------------------------
     def _refresh(self, norads: Iterable[int] | None = None) -> None:
@@ -612,10 +614,12 @@ class Archive:
         return events[0]
 
     def commit_many(
-        self, batches: dict[int, Sequence[PendingFile]]
+        self, batches: dict[int, Sequence[PendingFile]], temp_names: set[str] | None = None
     ) -> tuple[list[CommitEvent], list[tuple[int, Exception]]]:
         """Commit the files of many objects in one round: each object is replaced atomically,
         and the round pays for one flush of the file system instead of one per object.
+        `temp_names`: killed writers' temporary files, listed once for the rounds of one run
+        (`rsodb.archive.commits.list_temp_names`; default: listed in this round).
 
         Returns
         -------
@@ -626,7 +630,7 @@ class Archive:
             others are committed regardless.
         """
         events, failures = [], []
-        with self._transaction() as transaction:
+        with self._transaction(temp_names) as transaction:
             for norad in sorted(batches):
                 files = batches[norad]
                 try:
