@@ -104,21 +104,24 @@ def config_record(
 
 def cycles_config(axis: str, args) -> dict:
     """The fit of a Cycles-rendered pass: the paper's mesh from its file, the spin axis it was rendered with."""
+    sampler = {
+        "n_walkers": args.walkers,
+        "n_steps": args.steps,
+        "until_converged": args.until_converged,
+        "time_limit_s": args.time_limit_s,
+        "search_points": 120,
+        "search_popsize": args.search_popsize,
+        "search_maxiter": args.search_maxiter,
+    }
+    if args.init != "search":  # (the default start adds no key: journals of earlier runs keep theirs)
+        sampler.update(init=args.init, search_starts=args.search_starts, search_polish=args.search_polish)
     return {
         "name": "cycles",
         "band_draws": 0,
         "model": {"mesh": str(PAPER_OBJ), "materials": str(PAPER_MATERIALS), "spin_axis": axis, "n_sub": 1},
         "data": {"max_points": args.max_points},
         "parameters": CYCLES_PRIORS,
-        "sampler": {
-            "n_walkers": args.walkers,
-            "n_steps": args.steps,
-            "until_converged": args.until_converged,
-            "time_limit_s": args.time_limit_s,
-            "search_points": 120,
-            "search_popsize": args.search_popsize,
-            "search_maxiter": args.search_maxiter,
-        },
+        "sampler": sampler,
     }
 
 
@@ -496,6 +499,11 @@ def run_cycles(args, argv) -> int:
     worst95 = min(table95[n] for n in names)
     worst_bias = max(abs(bias[n]) for n in names)
     limits = f", at most {args.max_points} points (consecutive exposures binned)" if args.max_points else ""
+    search = (
+        f"multi-start: {args.search_starts} prior points screened, the best {args.search_polish} refined by Nelder-Mead"
+        if args.init == "multistart"
+        else f"differential evolution, population {args.search_popsize} per parameter, {args.search_maxiter} generations"
+    )
     if args.time_limit_s:
         limits += f", each fit stopped after {args.time_limit_s:.0f} s (search included)"
     section = f"""
@@ -511,8 +519,7 @@ P_pr 600-3000 s, cone 0-45 deg, phases uniform), spin axis body x (end over end,
 the footprint, {cycles["samples_per_px"]} samples/px in two seeds, {cycles["terminator"]}; its measured noise
 {np.median([r["cycles"]["noise_mag_rms"] for r in records]):.4f} mag RMS per frame (median over passes; max
 {max(r["cycles"]["noise_mag_max"] for r in records):.4f}). Fit: jitter free on 0-0.1 mag, {args.walkers} walkers,
-{args.steps} steps{" until converged (at most)" if args.until_converged else ""}, global search first (population
-{args.search_popsize} per parameter, {args.search_maxiter} generations){limits}. The fits took
+{args.steps} steps{" until converged (at most)" if args.until_converged else ""}, global search first ({search}){limits}. The fits took
 {fit_minutes:.0f} min together, {elapsed / 60:.0f} min of wall time on {os.cpu_count()} cores in the last run (load average
 {load[0]:.1f} at the end).
 
@@ -582,7 +589,9 @@ def main(argv=None) -> int:
     parser.add_argument("--steps", type=int, default=1500)
     parser.add_argument("--walkers", type=int, default=24)
     parser.add_argument("--samples", type=int, default=38, help="samples of the 30 s window used (default 38)")
-    parser.add_argument("--init", default="search", help="walker start: search | population | prior")
+    parser.add_argument("--init", default="search", help="walker start: search | multistart | population | prior")
+    parser.add_argument("--search-starts", type=int, default=1024, help="multistart: prior points screened")
+    parser.add_argument("--search-polish", type=int, default=8, help="multistart: best points refined")
     parser.add_argument("--moves", default="stretch", help="emcee moves: stretch | de")
     parser.add_argument("--search-popsize", type=int, default=15, help="search population per parameter (default 15)")
     parser.add_argument("--search-maxiter", type=int, default=100, help="search generations (default 100)")

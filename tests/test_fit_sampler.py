@@ -161,6 +161,18 @@ def test_search_start_puts_every_walker_in_the_true_mode_of_a_multimodal_posteri
     np.testing.assert_allclose(run.chain[-1, :, 0], TRUTH["spin_period_s"], atol=0.05)
 
 
+def test_multistart_start_puts_every_walker_in_the_true_mode_of_a_multimodal_posterior(tmp_path):
+    posterior = make_posterior(period_prior=(5.0, 20.0))
+    settings = SamplerSettings(
+        n_walkers=8, n_steps=30, init="multistart", search_starts=256, search_polish=4, search_polish_evals=150, seed=5
+    )
+    run = run_sampler(posterior, settings, tmp_path / "multistart.h5", progress=False)
+    assert run.init["method"] == "multistart" and 256 < run.init["evaluations"] <= 256 + 4 * 150 + 60 + 8 + 400
+    assert 1 <= run.init["search_starts_agreeing"] <= 4
+    np.testing.assert_allclose(run.chain[-1, :, 0], TRUTH["spin_period_s"], atol=0.05)
+    np.testing.assert_allclose(run.chain[-1, :, 1], TRUTH["spin_phase_deg"], atol=3.0)
+
+
 def test_posterior_widths_match_the_fisher_matrix(tmp_path):
     posterior = make_posterior()
     settings = SamplerSettings(n_walkers=16, n_steps=600, init="search", search_maxiter=20, search_popsize=6, seed=3)
