@@ -117,8 +117,8 @@ def main(argv=None) -> int:
         "until_converged": False,
         "time_limit_s": 0.0,
         "max_points": 0,
-        "search_popsize": 0,
-        "search_maxiter": 0,
+        "search_popsize": 8,  # (each evolution budget sets its own; the multi-start does not use them)
+        "search_maxiter": 30,
         "search_starts": args.search_starts,
         "search_polish": args.search_polish,
     }
