@@ -468,15 +468,8 @@ def init_from_multistart(
     posterior, settings: SamplerSettings, rng: np.random.Generator, evaluator: _Evaluator
 ) -> tuple[np.ndarray, dict]:
     """Walkers in a small ball around the best point of a multi-start search (`_search_multistart`)."""
-    space = posterior.space
     best, best_cost, search_evaluations, agreeing = _search_multistart(posterior, settings, rng, evaluator)
-    bounds = space.bounds
-    width = (bounds[:, 1] - bounds[:, 0]) * settings.ball_fraction
-
-    def ball(k: int) -> np.ndarray:
-        return _reflect_into(best + width * rng.standard_normal((k, space.ndim)), bounds, space.periods)
-
-    positions, evaluations = _finite_or_redraw(evaluator, ball, settings.n_walkers, "around the search's best point")
+    positions, evaluations = _walkers_around(best, posterior, settings, rng, evaluator)
     return positions, {
         "method": "multistart",
         "evaluations": search_evaluations + evaluations,
@@ -496,6 +489,22 @@ def _search_info(method, result, best, best_cost, evaluations) -> dict:
     }
 
 
+def _walkers_around(
+    best: np.ndarray, posterior, settings: SamplerSettings, rng: np.random.Generator, evaluator: _Evaluator
+) -> tuple[np.ndarray, int]:
+    """``n_walkers`` points in a ball of ``ball_fraction`` of each prior's width around `best`,
+    each with a finite full posterior; (positions, evaluations)."""
+    space = posterior.space
+    bounds = space.bounds
+    width = (bounds[:, 1] - bounds[:, 0]) * settings.ball_fraction
+
+    def ball(k: int) -> np.ndarray:
+        theta = best + width * rng.standard_normal((k, space.ndim))
+        return _reflect_into(theta, bounds, space.periods)
+
+    return _finite_or_redraw(evaluator, ball, settings.n_walkers, "around the search's best point")
+
+
 def init_from_search(
     posterior, settings: SamplerSettings, rng: np.random.Generator, evaluator: _Evaluator
 ) -> tuple[np.ndarray, dict]:
@@ -504,16 +513,8 @@ def init_from_search(
     The search minimises ``evaluator.cost`` (minus the coarse search posterior) and polishes
     its best point with L-BFGS-B; the ball is then checked on the full posterior.
     """
-    space = posterior.space
     result, best, best_cost, polish_evaluations = _search(posterior, settings, rng, evaluator)
-    bounds = space.bounds
-    width = (bounds[:, 1] - bounds[:, 0]) * settings.ball_fraction
-
-    def ball(k: int) -> np.ndarray:
-        theta = best + width * rng.standard_normal((k, space.ndim))
-        return _reflect_into(theta, bounds, space.periods)
-
-    positions, evaluations = _finite_or_redraw(evaluator, ball, settings.n_walkers, "around the search's best point")
+    positions, evaluations = _walkers_around(best, posterior, settings, rng, evaluator)
     return positions, _search_info(
         "search", result, best, best_cost, int(result.nfev) + polish_evaluations + evaluations
     )
