@@ -56,3 +56,47 @@ def test_68_percent_intervals_hold_the_truth_about_68_percent_of_the_time(tmp_pa
     assert low <= covered.mean() <= high, f"pooled coverage {covered.mean():.2f} outside {low:.2f}-{high:.2f}"
     # No parameter may be covered in fewer than 3 of 10 truths (P = 0.003 for p = 0.68).
     assert covered.sum(axis=0).min() >= 3, covered.sum(axis=0)
+
+
+class _PhaseModel:
+    """Magnitudes of a body whose light curve repeats `order` times per turn of its spin phase."""
+
+    def __init__(self, order: int):
+        self.order = order
+        self.t = np.linspace(0.0, 60.0, 300)
+
+    def magnitudes(self, values):
+        angle = np.radians(values["spin_phase_deg"]) + 2 * np.pi * self.t / 40.0
+        return 0.5 * np.cos(self.order * angle) + 0.2 * np.cos(self.order * 2 * angle)
+
+
+@pytest.mark.parametrize(("order", "turn"), [(1, None), (2, 180.0), (3, 120.0), (4, 90.0)])
+def test_look_alike_turn_is_the_bodys_symmetry(order, turn):
+    from rsodb.fit.coverage import look_alike_turns
+
+    turns = look_alike_turns(_PhaseModel(order), {"spin_phase_deg": 37.0}, ["spin_phase_deg"], 0.005)
+    assert turns.get("spin_phase_deg") == turn
+
+
+def test_a_posterior_at_the_look_alike_phase_covers_the_truth():
+    from types import SimpleNamespace
+
+    from rsodb.fit.coverage import _scores
+
+    rng = np.random.default_rng(3)
+    # Half the draws at the truth turned by 180 deg, half at the truth: both are the same state.
+    draws = np.concatenate([190.0 + 3.0 * rng.standard_normal(2000), 10.0 + 3.0 * rng.standard_normal(2000)])
+    draws = np.mod(draws, 360.0)[:, None]
+    space = SimpleNamespace(free=[SimpleNamespace(name="spin_phase_deg", period=360.0, prior=SimpleNamespace(low=0.0))])
+    low, mid, high = np.percentile(draws[:, 0], [16, 50, 84])
+    result = SimpleNamespace(samples=draws, median=[mid], p16=[low], p84=[high])
+    truth = {"spin_phase_deg": 10.0}
+
+    median, p16, p84, covered, quantile, bias = _scores(space, result, truth, {"spin_phase_deg": 180.0})
+    assert abs(median["spin_phase_deg"] - 10.0) < 0.5
+    assert p84["spin_phase_deg"] - p16["spin_phase_deg"] == pytest.approx(6.0, rel=0.1)
+    assert covered["spin_phase_deg"] and 0.3 < quantile["spin_phase_deg"] < 0.7 and abs(bias["spin_phase_deg"]) < 0.3
+
+    # Scored modulo the full turn, the bimodal posterior's 16-84% interval spans half the circle.
+    median, p16, p84, *_ = _scores(space, result, truth, {})
+    assert p84["spin_phase_deg"] - p16["spin_phase_deg"] > 150.0

@@ -34,6 +34,7 @@ __all__ = [
     "recover",
     "recover_observed",
     "draw_visible_truth",
+    "look_alike_turns",
     "coverage_bounds",
     "coverage_study",
     "coverage_table",
@@ -177,6 +178,10 @@ class Recovery:
         (median - truth) over the posterior's sigma, half the 16-84% width.
     residual_rms_mag : float
         RMS of data minus best fit over every sample of the fitted window.
+    look_alike_turns : mapping of str to float
+        Angles scored modulo a turn that leaves the light curve unchanged (`look_alike_turns`),
+        e.g. ``{"spin_phase_deg": 180.0}`` for a body that looks the same turned half a
+        revolution about its spin axis; their median, p16 and p84 are on that fold.
     """
 
     truth: Mapping[str, float]
@@ -191,48 +196,84 @@ class Recovery:
     elapsed_s: float
     bias_sigma: Mapping[str, float] = field(default_factory=dict)
     residual_rms_mag: float = math.nan
+    look_alike_turns: Mapping[str, float] = field(default_factory=dict)
 
     @property
     def covered95(self) -> dict[str, bool]:
         return {name: bool(0.025 <= q <= 0.975) for name, q in self.quantile.items()}
 
 
-def _on_branch(parameter, value: float, centre: float) -> float:
+def _on_branch(value, centre: float, period: float | None):
     """`value` moved by whole periods of a wrapped angle to within half a period of `centre`."""
-    if parameter.period is None:
+    if period is None:
         return value
-    return centre + np.mod(value - centre + parameter.period / 2, parameter.period) - parameter.period / 2
+    return centre + np.mod(value - centre + period / 2, period) - period / 2
 
 
-def _covered(space, result, truth) -> dict[str, bool]:
-    return {
-        p.name: bool(result.p16[i] <= _on_branch(p, truth[p.name], result.median[i]) <= result.p84[i])
-        for i, p in enumerate(space.free)
-        if p.name in truth
-    }
+def _circular_mean(draws: np.ndarray, period: float) -> float:
+    angle = 2 * np.pi * draws / period
+    return float(period * np.angle(np.mean(np.exp(1j * angle))) / (2 * np.pi))
 
 
-def _bias_sigma(space, result, truth) -> dict[str, float]:
-    bias = {}
+# Orders of rotational symmetry tried for a wrapped angle, largest first (see `look_alike_turns`).
+_SYMMETRY_ORDERS = (6, 4, 3, 2)
+
+
+def look_alike_turns(model, values: Mapping[str, float], names, tolerance_mag: float) -> dict[str, float]:
+    """The turn under which each wrapped angle leaves the light curve unchanged.
+
+    A body that looks the same turned half a revolution about its spin axis gives the same light
+    curve at spin phase phi and phi + 180 deg: the data cannot tell those states apart, and a
+    posterior in either is right. For each angle in `names` whose parameter wraps (a phase), the
+    model is rendered at `values` and with the angle turned by 360/n deg for n in 6, 4, 3, 2;
+    the first turn whose light curve differs by less than `tolerance_mag` RMS (after removing the
+    mean, which the fit's offset absorbs) is returned for that angle. Angles with no such turn are
+    left out.
+    """
+    reference = model.magnitudes(dict(values))
+    turns = {}
+    for name in names:
+        for order in _SYMMETRY_ORDERS:
+            turned = dict(values, **{name: values[name] + 360.0 / order})
+            difference = model.magnitudes(turned) - reference
+            if np.all(np.isfinite(difference)):
+                difference = difference - np.mean(difference)
+                if np.sqrt(np.mean(difference**2)) < tolerance_mag:
+                    turns[name] = 360.0 / order
+                    break
+    return turns
+
+
+def _scores(space, result, truth, turns: Mapping[str, float]):
+    """Posterior summary and the truth's place in it, per free parameter with a truth.
+
+    An angle in `turns` is folded at that turn (a look-alike turn of the body, shorter than its
+    own period): its draws are unrolled around their circular mean at the turn and summarised
+    again. Wrapped angles put the truth on the branch of the posterior median.
+
+    Returns (median, p16, p84, covered, quantile, bias_sigma), mappings by name.
+    """
+    median, p16, p84, covered, quantile, bias = {}, {}, {}, {}, {}, {}
     for i, parameter in enumerate(space.free):
-        if parameter.name not in truth:
-            continue
-        sigma = 0.5 * (result.p84[i] - result.p16[i])
-        value = _on_branch(parameter, truth[parameter.name], result.median[i])
-        bias[parameter.name] = float((result.median[i] - value) / sigma) if sigma > 0 else math.inf
-    return bias
-
-
-def _quantiles(space, result, truth) -> dict[str, float]:
-    quantiles = {}
-    for i, parameter in enumerate(space.free):
-        if parameter.name not in truth:
-            continue
+        name = parameter.name
         draws = result.samples[:, i]
+        period = turns.get(name, parameter.period)
+        if name in turns:
+            centre = _circular_mean(draws, period)
+            centre = parameter.prior.low + np.mod(centre - parameter.prior.low, period)
+            draws = _on_branch(draws, centre, period)
+            low, mid, high = (float(v) for v in np.percentile(draws, [16.0, 50.0, 84.0]))
+        else:
+            low, mid, high = float(result.p16[i]), float(result.median[i]), float(result.p84[i])
+        median[name], p16[name], p84[name] = mid, low, high
+        if name not in truth:
+            continue
+        covered[name] = bool(low <= _on_branch(truth[name], mid, period) <= high)
         # The draws are unrolled around their circular mean: put the truth on their branch.
-        value = _on_branch(parameter, truth[parameter.name], np.median(draws))
-        quantiles[parameter.name] = float(np.mean(draws < value))
-    return quantiles
+        quantile[name] = float(np.mean(draws < _on_branch(truth[name], np.median(draws), period)))
+        sigma = 0.5 * (high - low)
+        bias[name] = float((mid - _on_branch(truth[name], mid, period)) / sigma) if sigma > 0 else math.inf
+    return median, p16, p84, covered, quantile, bias
 
 
 def draw_visible_truth(posterior, rng: np.random.Generator, attempts: int = 200) -> dict[str, float]:
@@ -248,7 +289,14 @@ def draw_visible_truth(posterior, rng: np.random.Generator, attempts: int = 200)
 
 
 def recover_observed(
-    observed: Pass, config, truth: Mapping[str, float], seed: int, *, chain_dir, store=None
+    observed: Pass,
+    config,
+    truth: Mapping[str, float],
+    seed: int,
+    *,
+    chain_dir,
+    store=None,
+    look_alike_mag: float | None = None,
 ) -> Recovery:
     """Fit `observed` and compare the posterior with the `truth` it was made from.
 
@@ -266,6 +314,10 @@ def recover_observed(
         Where the chain file goes (removed afterwards).
     store : ShapeStore, optional
         Shape caches (a process pool's workers share a disk store).
+    look_alike_mag : float, optional
+        Score a phase modulo a turn of the body that changes the fit's model light curve at the
+        truth by less than this RMS (`look_alike_turns`): the data cannot tell those states
+        apart. None (the default) scores every angle modulo its own period.
     """
     started = time.perf_counter()
     config = config.replace(sampler={"seed": int(seed)})
@@ -287,19 +339,26 @@ def recover_observed(
     # A parameter the data were not drawn with (the jitter of passes with Gaussian noise only,
     # as the Cycles passes) has no truth to hold: it is fitted, not scored.
     truth = {name: float(truth[name]) for name in names if name in truth}
+    turns = {}
+    if look_alike_mag is not None:
+        values = dict(space.fixed, **dict(zip(names, result.median.tolist())), **truth)
+        angles = [p.name for p in space.free if p.period is not None and p.name in truth]
+        turns = look_alike_turns(problem.posterior.model, values, angles, look_alike_mag)
+    median, p16, p84, covered, quantile, bias = _scores(space, result, truth, turns)
     return Recovery(
         truth,
-        dict(zip(names, result.median.tolist())),
-        dict(zip(names, result.p16.tolist())),
-        dict(zip(names, result.p84.tolist())),
-        _covered(space, result, truth),
-        _quantiles(space, result, truth),
+        median,
+        p16,
+        p84,
+        covered,
+        quantile,
         float((result.n_steps - result.discard) / np.nanmax(result.autocorr_time)),
         result.converged,
         result.verdict,
         time.perf_counter() - started,
-        _bias_sigma(space, result, truth),
+        bias,
         result.residual_rms_mag,
+        turns,
     )
 
 
