@@ -100,3 +100,25 @@ def test_a_posterior_at_the_look_alike_phase_covers_the_truth():
     # Scored modulo the full turn, the bimodal posterior's 16-84% interval spans half the circle.
     median, p16, p84, *_ = _scores(space, result, truth, {})
     assert p84["spin_phase_deg"] - p16["spin_phase_deg"] > 150.0
+
+
+def test_look_alike_turns_of_a_fit_read_the_truth_over_the_median():
+    from rsodb.fit.coverage import _values_at_truth, _wrapped, look_alike_turns
+    from rsodb.fit.parameters import ParameterSpace
+
+    config = FitConfig.from_dict(
+        {"model": {"shape": "box"}, "parameters": {"spin_period_s": {"kind": "uniform", "low": 10.0, "high": 15.0}}}
+    )
+    space = config.parameter_space({})
+    names = space.names
+    assert "spin_phase_deg" in names and "spin_period_s" in names
+    median = np.array([space.free[i].prior.low + 1.0 for i in range(len(names))])
+    truth = {"spin_period_s": 12.5, "spin_phase_deg": 37.0}
+    values = _values_at_truth(space, median, truth)
+    assert values["spin_period_s"] == 12.5 and values["spin_phase_deg"] == 37.0
+    other = next(n for n in names if n not in truth)
+    assert values[other] == median[names.index(other)]
+    assert set(space.fixed) <= set(values) and isinstance(space, ParameterSpace)
+    assert _wrapped(space, truth) == ["spin_phase_deg"]
+    turns = look_alike_turns(_PhaseModel(2), values, _wrapped(space, truth), 0.005)
+    assert turns == {"spin_phase_deg": 180.0}

@@ -244,6 +244,17 @@ def look_alike_turns(model, values: Mapping[str, float], names, tolerance_mag: f
     return turns
 
 
+def _values_at_truth(space, median, truth) -> dict[str, float]:
+    """Every parameter's value: the truth where there is one, else the posterior median (a
+    parameter the data were not drawn with), else the fixed value."""
+    return {**space.fixed, **dict(zip(space.names, np.asarray(median, dtype=float).tolist())), **truth}
+
+
+def _wrapped(space, truth) -> list[str]:
+    """The free wrapped angles that have a truth."""
+    return [p.name for p in space.free if p.period is not None and p.name in truth]
+
+
 def _scores(space, result, truth, turns: Mapping[str, float]):
     """Posterior summary and the truth's place in it, per free parameter with a truth.
 
@@ -341,9 +352,9 @@ def recover_observed(
     truth = {name: float(truth[name]) for name in names if name in truth}
     turns = {}
     if look_alike_mag is not None:
-        values = dict(space.fixed, **dict(zip(names, result.median.tolist())), **truth)
-        angles = [p.name for p in space.free if p.period is not None and p.name in truth]
-        turns = look_alike_turns(problem.posterior.model, values, angles, look_alike_mag)
+        turns = look_alike_turns(
+            problem.posterior.model, _values_at_truth(space, result.median, truth), _wrapped(space, truth), look_alike_mag
+        )
     median, p16, p84, covered, quantile, bias = _scores(space, result, truth, turns)
     return Recovery(
         truth,
