@@ -353,7 +353,10 @@ def recover_observed(
     turns = {}
     if look_alike_mag is not None:
         turns = look_alike_turns(
-            problem.posterior.model, _values_at_truth(space, result.median, truth), _wrapped(space, truth), look_alike_mag
+            problem.posterior.model,
+            _values_at_truth(space, result.median, truth),
+            _wrapped(space, truth),
+            look_alike_mag,
         )
     median, p16, p84, covered, quantile, bias = _scores(space, result, truth, turns)
     return Recovery(
