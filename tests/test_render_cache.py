@@ -109,6 +109,40 @@ def test_elements_partly_covered_by_a_mount_are_quartered(monkeypatch):
     assert rms_mag(whole.intensity(sun, obs), reference) > 0.01
 
 
+def test_a_window_narrower_than_the_grid_is_seen_through(monkeypatch):
+    # A floor seen 2-4 deg above its plane through a 6 cm window in a wall 1-4 m away: the window
+    # spans 1-3 deg, less than the 2.8 deg cube map, so the four grid nodes around the observer
+    # are blocked for most of the floor that sees out. The bit-held elements' gap nodes
+    # (_horizon_gaps) let rays decide; without them the floor is 0.2-2.9 mag too faint.
+    import raycast.renderer.cache
+
+    monkeypatch.setattr(raycast.renderer.cache, "_FACTOR_MIN_ELEMENTS", 10**9)  # every element as bits
+
+    def slab(name, y0, y1, z0, z1):
+        return Part.box(name, (0.02, y1 - y0, z1 - z0), "black", center_m=(2.6, (y0 + y1) / 2, (z0 + z1) / 2))
+
+    wall = [
+        slab("left", -0.4, 0.0, 0.0, 0.4),
+        slab("right", 0.06, 0.46, 0.0, 0.4),
+        slab("below", 0.0, 0.06, 0.0, 0.12),
+        slab("above", 0.0, 0.06, 0.18, 0.4),
+    ]
+    scene = Scene.from_parts(
+        [Part.plate("floor", 3.0, 0.3, "paint"), *wall], {"paint": Lambertian(0.5), "black": Lambertian(0.001)}
+    )
+    elevation, azimuth = (a.ravel() for a in np.meshgrid(np.radians([2.2, 3.1, 4.3]), np.radians([-0.9, 0.4, 1.1])))
+    obs = np.column_stack([np.cos(elevation) * np.cos(azimuth), np.cos(elevation) * np.sin(azimuth), np.sin(elevation)])
+    sun = np.tile(unit(np.array([-0.3, 0.1, 0.95])), (len(obs), 1))  # lights the floor, not the wall's far side
+    reference = DirectRenderer(scene, 0.002).intensity(sun, obs)
+    cache = SceneCache.build(scene, element_size_m=0.03)
+    assert len(cache.poses[0].gap_word) > 0
+    assert rms_mag(cache.intensity(sun, obs), reference) < 0.05
+    monkeypatch.setattr(raycast.renderer.cache, "_GAP_RINGS", ())  # no gap nodes
+    blind = SceneCache.build(scene, element_size_m=0.03)
+    assert len(blind.poses[0].gap_word) == 0
+    assert rms_mag(blind.intensity(sun, obs), reference) > 0.5
+
+
 def test_articulation_axis_interpolates_between_poses():
     scene = articulated_scene()
     cache = SceneCache.build(scene, articulation_grid={"pitch_deg": [8.0, 10.0, 12.0]}, grid_size=24)

@@ -167,6 +167,86 @@ def _mixed_pairs(words, sun_nodes, obs_nodes, sun, obs, normals, frames, element
     return count
 
 
+def gap_pairs(words, gap_ptr, gap_word, gap_mask, sun_nodes, obs_nodes, sun, obs, normals):
+    """The (frame, element) pairs that may see through a gap narrower than the grid, to decide by rays.
+
+    A node of an element's gap table (``gap_ptr``/``gap_word``/``gap_mask``: CSR by node of
+    (word, bit mask) of bit-held elements; built by ``raycast.renderer.cache._horizon_gaps``) is
+    blocked in the bits, close above the element's horizon, and has an open direction within
+    half a grid spacing of it. A pair whose four nodes around the Sun (or the observer) are all
+    blocked counts dark in :func:`mixed_pairs`; where one of those nodes is a gap node and the
+    other side is seen (or lit, or a gap node too) at some node, rays toward the exact
+    directions decide. Disjoint from :func:`mixed_pairs` (which needs both sides set at some
+    node) and from the whole pairs (all eight set).
+
+    Returns frames, elements, need as :func:`mixed_pairs`, in frame order.
+    """
+    capacity = 4096
+    while True:
+        frames, elements = np.empty(capacity, dtype=np.int64), np.empty(capacity, dtype=np.int64)
+        need = np.empty(capacity, dtype=np.uint8)
+        count = _gap_pairs(
+            words, gap_ptr, gap_word, gap_mask, sun_nodes, obs_nodes, sun, obs, normals, frames, elements, need
+        )
+        if count <= capacity:
+            return frames[:count], elements[:count], need[:count]
+        capacity = count
+
+
+@njit(cache=True, nogil=True)
+def _gap_pairs(words, gap_ptr, gap_word, gap_mask, sun_nodes, obs_nodes, sun, obs, normals, frames, elements, need):
+    m, n_words = sun_nodes.shape[0], words.shape[1]
+    capacity = len(frames)
+    count = 0
+    zero, one = np.uint64(0), np.uint64(1)
+    sun_gap = np.zeros(n_words, dtype=np.uint64)
+    obs_gap = np.zeros(n_words, dtype=np.uint64)
+    touched = np.empty(max(1, n_words), dtype=np.int64)
+    for f in range(m):
+        n_touched = 0
+        for side in range(2):
+            for j in range(4):
+                node = sun_nodes[f, j] if side == 0 else obs_nodes[f, j]
+                for k in range(gap_ptr[node], gap_ptr[node + 1]):
+                    w = gap_word[k]
+                    if sun_gap[w] == zero and obs_gap[w] == zero:
+                        touched[n_touched] = w
+                        n_touched += 1
+                    if side == 0:
+                        sun_gap[w] |= gap_mask[k]
+                    else:
+                        obs_gap[w] |= gap_mask[k]
+        if n_touched == 0:
+            continue
+        s0, s1, s2, s3 = sun_nodes[f, 0], sun_nodes[f, 1], sun_nodes[f, 2], sun_nodes[f, 3]
+        o0, o1, o2, o3 = obs_nodes[f, 0], obs_nodes[f, 1], obs_nodes[f, 2], obs_nodes[f, 3]
+        sx, sy, sz = sun[f, 0], sun[f, 1], sun[f, 2]
+        ox, oy, oz = obs[f, 0], obs[f, 1], obs[f, 2]
+        for t in range(n_touched):
+            w = touched[t]
+            a, b, c, d = words[s0, w], words[s1, w], words[s2, w], words[s3, w]
+            sun_all, sun_any = a & b & c & d, a | b | c | d
+            a, b, c, d = words[o0, w], words[o1, w], words[o2, w], words[o3, w]
+            obs_all, obs_any = a & b & c & d, a | b | c | d
+            gaps = (sun_any | sun_gap[w]) & (obs_any | obs_gap[w]) & ~(sun_any & obs_any)
+            sun_gap[w], obs_gap[w] = zero, zero
+            base = 64 * w
+            while gaps != zero:
+                bit = _lowest_bit(gaps)
+                gaps &= gaps - one
+                e = base + bit
+                nx, ny, nz = normals[e, 0], normals[e, 1], normals[e, 2]
+                if nx * sx + ny * sy + nz * sz <= -SUN_RADIUS_SINE or nx * ox + ny * oy + nz * oz <= 0.0:
+                    continue
+                if count < capacity:
+                    shift = np.uint64(bit)
+                    frames[count] = f
+                    elements[count] = e
+                    need[count] = (((sun_all >> shift) & one) ^ one) | ((((obs_all >> shift) & one) ^ one) << one)
+                count += 1
+    return count
+
+
 @njit(cache=True, nogil=True)
 def lit_classes(
     words,

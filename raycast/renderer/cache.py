@@ -202,6 +202,9 @@ class _Pose:
     raw_area: object  # (g, e) CSC float32: area of each element's pieces in each group
     raw_corners: np.ndarray  # (e, 3, 3) float32: the bit-held elements' corners (ray origins)
     raw_normals: np.ndarray  # (e, 3) float32: and their geometric normals
+    gap_ptr: np.ndarray  # (d + 1,) int64: CSR by node of the bit-held elements' gap nodes (_horizon_gaps)
+    gap_word: np.ndarray  # (q,) int64: their words
+    gap_mask: np.ndarray  # (q,) uint64: and bit masks
     vertices_m: np.ndarray  # (3t, 3) float32: the posed triangles' corners, for exact visibility rays
     ray_offset_m: float  # how far above its element a visibility ray starts
     n_elements: int
@@ -495,6 +498,21 @@ def _lit_classes(pose, sun, obs, grid_size, edge_weights):
         frames, elements, need = _cache_kernels.mixed_pairs(
             pose.raw_bits, sun_nodes, obs_nodes, sun32, obs32, pose.raw_normals
         )
+        if len(pose.gap_word):
+            gap = _cache_kernels.gap_pairs(
+                pose.raw_bits,
+                pose.gap_ptr,
+                pose.gap_word,
+                pose.gap_mask,
+                sun_nodes,
+                obs_nodes,
+                sun32,
+                obs32,
+                pose.raw_normals,
+            )
+            if len(gap[0]):
+                order = np.argsort(np.r_[frames, gap[0]], kind="stable")
+                frames, elements, need = (np.r_[a, b][order] for a, b in zip((frames, elements, need), gap))
         if len(frames):
             rays = _cache_kernels.pair_rays(
                 need, frames, elements, _ray_origins(pose, edge_weights), pose.raw_normals, sun32, obs32
@@ -728,6 +746,8 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quant
         above = directions @ raw_geo[begin : begin + 8 * 64].T > -band
         words = _cache_kernels.pack_words(_unpacked(visibility[columns], len(directions)).astype(bool) & above)
         raw_bits[:, begin // 64 : begin // 64 + words.shape[1]] = words
+    raw_corners = el_corners[raw_columns].astype(np.float32) if len(raw_columns) else np.zeros((0, 3, 3), np.float32)
+    gap_ptr, gap_word, gap_mask, gap_rays = _horizon_gaps(mesh, raw_corners, raw_geo, raw_bits, directions, band)
     return _Pose(
         normal_shade.astype(np.float32),
         group_class.astype(np.int32),
@@ -740,13 +760,16 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quant
         raw_bits,
         len(raw_columns),
         raw_area,
-        el_corners[raw_columns].astype(np.float32) if len(raw_columns) else np.zeros((0, 3, 3), np.float32),
+        raw_corners,
         raw_geo.astype(np.float32) if len(raw_columns) else np.zeros((0, 3), np.float32),
+        gap_ptr,
+        gap_word,
+        gap_mask,
         mesh.vertices_m.astype(np.float32),
         _ray_offset_m(mesh),
         n_groups + len(pairs),
         len(pairs),
-        n_rays,
+        n_rays + gap_rays,
         blocks,
     )
 
@@ -767,6 +790,86 @@ def _quarters(corners, normals):
         [np.stack(t, axis=1) for t in ((na, nab, nca), (nab, nb, nbc), (nca, nbc, nc), (nab, nbc, nca))], axis=1
     )
     return quarter_corners, quarter_normals
+
+
+# Directions cast around a gap node's grid direction: this many on each ring, the rings this
+# many grid spacings away.
+_GAP_PROBES = 8
+_GAP_RINGS = (0.25, 0.5)
+
+
+def _horizon_gaps(mesh, corners, normals, raw_bits, directions, band):
+    """Grid nodes close above a bit-held element's horizon where it sees out through a gap
+    narrower than the grid.
+
+    An element of a long tube looks along the tube a few degrees above its plane; there a line
+    of sight can pass between fittings through a gap narrower than the grid spacing, so the
+    four nodes around the exact direction are blocked while the direction is open, and the
+    bits count the element unseen (the paper's COSMOS 2502 seen nearly end-on: 0.13-0.30 mag
+    too faint). For each blocked node less than ``band`` (a sine, two grid spacings) above an
+    element's plane, ``_GAP_PROBES`` rays on each of the rings ``_GAP_RINGS`` grid spacings
+    around it are cast (those above the plane); a node with any of them open is a *gap node*,
+    and at run time (:func:`_lit_classes`) a pair with a gap node among its four nodes is
+    decided by rays toward the exact direction.
+
+    Returns (gap_ptr, gap_word, gap_mask): CSR by node (d + 1,) of (word, bit mask) of the
+    elements for which the node is a gap node, and the rays cast.
+    """
+    n_directions, n_elements = len(directions), len(corners)
+    if n_elements == 0 or not _GAP_RINGS:
+        return np.zeros(n_directions + 1, np.int64), np.zeros(0, np.int64), np.zeros(0, np.uint64), 0
+    raycaster, offset = open3d_scene(mesh), _ray_offset_m(mesh)
+    u, v = orthonormal_basis(directions)
+    angles = 2.0 * np.pi * (np.arange(_GAP_PROBES) + 0.5 * np.arange(len(_GAP_RINGS))[:, None]) / _GAP_PROBES
+    radius = np.tan(np.array(_GAP_RINGS)[:, None] * _grid_spacing_rad(directions)) * np.ones_like(angles)
+    angles, radius = angles.ravel(), radius.ravel()
+    around = directions[:, None, :] + radius[None, :, None] * (
+        np.cos(angles)[None, :, None] * u[:, None, :] + np.sin(angles)[None, :, None] * v[:, None, :]
+    )
+    around /= np.linalg.norm(around, axis=2, keepdims=True)  # (d, probes, 3)
+    origins = corners.astype(float).mean(axis=1) + offset * normals
+    nodes, elements, n_rays = [], [], 0
+    # Elements per batch, whole words, so that a batch casts about _MAX_BUILD_RAYS: a node is
+    # within the band above an element's plane for a share band / 2 of the directions.
+    per_element = max(1, int(len(directions) * band / 2.0) * around.shape[1])
+    chunk = 64 * max(1, _MAX_BUILD_RAYS // (64 * per_element))
+    for begin in range(0, n_elements, chunk):
+        end = min(begin + chunk, n_elements)
+        height = directions @ normals[begin:end].T  # (d, c)
+        bits = np.unpackbits(
+            np.ascontiguousarray(raw_bits[:, begin // 64 : -(-end // 64)]).view(np.uint8), axis=1, bitorder="little"
+        )[:, : end - begin].astype(bool)
+        node, element = np.nonzero((height > 0.0) & (height < band) & ~bits)
+        if len(node) == 0:
+            continue
+        element += begin
+        toward = around[node]  # (p, probes, 3)
+        pair, probe = np.nonzero(np.einsum("pkx,px->pk", toward, normals[element]) > 0.0)  # probes above the plane
+        rays = np.empty((len(pair), 6), dtype=np.float32)
+        rays[:, :3] = origins[element[pair]]
+        rays[:, 3:] = toward[pair, probe]
+        open_ = np.zeros(len(rays), dtype=bool)
+        for first in range(0, len(rays), _MAX_BUILD_RAYS):
+            batch = rays[first : first + _MAX_BUILD_RAYS]
+            open_[first : first + len(batch)] = ~raycaster.test_occlusions(batch).numpy()
+        n_rays += len(rays)
+        gap = np.zeros(len(node), dtype=bool)
+        gap[pair[open_]] = True
+        nodes.append(node[gap])
+        elements.append(element[gap])
+    node = np.concatenate(nodes) if nodes else np.zeros(0, np.int64)
+    element = np.concatenate(elements) if elements else np.zeros(0, np.int64)
+    word = element // 64
+    key = np.unique(node.astype(np.int64) * (raw_bits.shape[1] + 1) + word)
+    gap_node, gap_word = key // (raw_bits.shape[1] + 1), key % (raw_bits.shape[1] + 1)
+    mask = np.zeros(len(key), dtype=np.uint64)
+    np.bitwise_or.at(
+        mask,
+        np.searchsorted(key, node.astype(np.int64) * (raw_bits.shape[1] + 1) + word),
+        np.left_shift(np.uint64(1), (element % 64).astype(np.uint64)),
+    )
+    gap_ptr = np.r_[0, np.cumsum(np.bincount(gap_node, minlength=n_directions))].astype(np.int64)
+    return gap_ptr, gap_word.astype(np.int64), mask, n_rays
 
 
 def _split_where_partly_visible(mesh, corners, normals, tri, side, exposed, n_geo, directions, band, progress):
