@@ -120,13 +120,18 @@ def mixed_pairs(words, sun_nodes, obs_nodes, sun, obs, normals):
     need : (p,) uint8, bit 0: the Sun's four nodes differ (cast toward the Sun), bit 1: the
         observer's do.
     """
-    # The pairs go to arrays sized from a first guess (a thirty-second of all pairs; 1% is
-    # usual); when they overflow, the loop runs again with room for all.
+    # A first guess: a thirty-second of all pairs (1% is usual).
     capacity = max(4096, len(sun_nodes) * len(normals) // 32)
+    return _collected(_mixed_pairs, capacity, words, sun_nodes, obs_nodes, sun, obs, normals)
+
+
+def _collected(kernel, capacity, *arguments):
+    """``kernel(*arguments, frames, elements, need)``'s pairs, in arrays sized `capacity` first;
+    when they overflow (the kernel returns how many there were), it runs again with room for all."""
     while True:
         frames, elements = np.empty(capacity, dtype=np.int64), np.empty(capacity, dtype=np.int64)
         need = np.empty(capacity, dtype=np.uint8)
-        count = _mixed_pairs(words, sun_nodes, obs_nodes, sun, obs, normals, frames, elements, need)
+        count = kernel(*arguments, frames, elements, need)
         if count <= capacity:
             return frames[:count], elements[:count], need[:count]
         capacity = count
@@ -136,9 +141,8 @@ def mixed_pairs(words, sun_nodes, obs_nodes, sun, obs, normals):
 def _mixed_pairs(words, sun_nodes, obs_nodes, sun, obs, normals, frames, elements, need):
     # The pair arrays come in full size: growing them inside the loop made it three times slower.
     m, n_words = sun_nodes.shape[0], words.shape[1]
-    capacity = len(frames)
     count = 0
-    zero, one = np.uint64(0), np.uint64(1)
+    zero = np.uint64(0)
     for f in range(m):
         s0, s1, s2, s3 = sun_nodes[f, 0], sun_nodes[f, 1], sun_nodes[f, 2], sun_nodes[f, 3]
         o0, o1, o2, o3 = obs_nodes[f, 0], obs_nodes[f, 1], obs_nodes[f, 2], obs_nodes[f, 3]
@@ -150,20 +154,34 @@ def _mixed_pairs(words, sun_nodes, obs_nodes, sun, obs, normals, frames, element
             a, b, c, d = words[o0, w], words[o1, w], words[o2, w], words[o3, w]
             obs_all, obs_any = a & b & c & d, a | b | c | d
             mixed = sun_any & obs_any & ~(sun_all & obs_all)
-            base = 64 * w
-            while mixed != zero:
-                bit = _lowest_bit(mixed)
-                mixed &= mixed - one
-                e = base + bit
-                nx, ny, nz = normals[e, 0], normals[e, 1], normals[e, 2]
-                if nx * sx + ny * sy + nz * sz <= -SUN_RADIUS_SINE or nx * ox + ny * oy + nz * oz <= 0.0:
-                    continue
-                if count < capacity:
-                    shift = np.uint64(bit)
-                    frames[count] = f
-                    elements[count] = e
-                    need[count] = (((sun_all >> shift) & one) ^ one) | ((((obs_all >> shift) & one) ^ one) << one)
-                count += 1
+            if mixed != zero:
+                count = _add_pairs(
+                    mixed, w, sun_all, obs_all, f, sx, sy, sz, ox, oy, oz, normals, frames, elements, need, count
+                )
+    return count
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _add_pairs(chosen, w, sun_all, obs_all, f, sx, sy, sz, ox, oy, oz, normals, frames, elements, need, count):
+    """Append frame f's pairs with the elements of word w set in `chosen` that face both exact
+    directions; `need` says which of their nodes differ (see :func:`mixed_pairs`). Past the
+    arrays' capacity pairs are only counted. Returns the new count."""
+    zero, one = np.uint64(0), np.uint64(1)
+    capacity = len(frames)
+    base = 64 * w
+    while chosen != zero:
+        bit = _lowest_bit(chosen)
+        chosen &= chosen - one
+        e = base + bit
+        nx, ny, nz = normals[e, 0], normals[e, 1], normals[e, 2]
+        if nx * sx + ny * sy + nz * sz <= -SUN_RADIUS_SINE or nx * ox + ny * oy + nz * oz <= 0.0:
+            continue
+        if count < capacity:
+            shift = np.uint64(bit)
+            frames[count] = f
+            elements[count] = e
+            need[count] = (((sun_all >> shift) & one) ^ one) | ((((obs_all >> shift) & one) ^ one) << one)
+        count += 1
     return count
 
 
@@ -181,24 +199,14 @@ def gap_pairs(words, gap_ptr, gap_word, gap_mask, sun_nodes, obs_nodes, sun, obs
 
     Returns frames, elements, need as :func:`mixed_pairs`, in frame order.
     """
-    capacity = 4096
-    while True:
-        frames, elements = np.empty(capacity, dtype=np.int64), np.empty(capacity, dtype=np.int64)
-        need = np.empty(capacity, dtype=np.uint8)
-        count = _gap_pairs(
-            words, gap_ptr, gap_word, gap_mask, sun_nodes, obs_nodes, sun, obs, normals, frames, elements, need
-        )
-        if count <= capacity:
-            return frames[:count], elements[:count], need[:count]
-        capacity = count
+    return _collected(_gap_pairs, 4096, words, gap_ptr, gap_word, gap_mask, sun_nodes, obs_nodes, sun, obs, normals)
 
 
 @njit(cache=True, nogil=True)
 def _gap_pairs(words, gap_ptr, gap_word, gap_mask, sun_nodes, obs_nodes, sun, obs, normals, frames, elements, need):
     m, n_words = sun_nodes.shape[0], words.shape[1]
-    capacity = len(frames)
     count = 0
-    zero, one = np.uint64(0), np.uint64(1)
+    zero = np.uint64(0)
     sun_gap = np.zeros(n_words, dtype=np.uint64)
     obs_gap = np.zeros(n_words, dtype=np.uint64)
     touched = np.empty(max(1, n_words), dtype=np.int64)
@@ -230,20 +238,9 @@ def _gap_pairs(words, gap_ptr, gap_word, gap_mask, sun_nodes, obs_nodes, sun, ob
             obs_all, obs_any = a & b & c & d, a | b | c | d
             gaps = (sun_any | sun_gap[w]) & (obs_any | obs_gap[w]) & ~(sun_any & obs_any)
             sun_gap[w], obs_gap[w] = zero, zero
-            base = 64 * w
-            while gaps != zero:
-                bit = _lowest_bit(gaps)
-                gaps &= gaps - one
-                e = base + bit
-                nx, ny, nz = normals[e, 0], normals[e, 1], normals[e, 2]
-                if nx * sx + ny * sy + nz * sz <= -SUN_RADIUS_SINE or nx * ox + ny * oy + nz * oz <= 0.0:
-                    continue
-                if count < capacity:
-                    shift = np.uint64(bit)
-                    frames[count] = f
-                    elements[count] = e
-                    need[count] = (((sun_all >> shift) & one) ^ one) | ((((obs_all >> shift) & one) ^ one) << one)
-                count += 1
+            count = _add_pairs(
+                gaps, w, sun_all, obs_all, f, sx, sy, sz, ox, oy, oz, normals, frames, elements, need, count
+            )
     return count
 
 
