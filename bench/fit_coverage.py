@@ -116,7 +116,7 @@ def cycles_config(axis: str, args) -> dict:
         "search_popsize": args.search_popsize,
         "search_maxiter": args.search_maxiter,
     }
-    if args.init != "search":  # (the default start adds no key: journals of earlier runs keep theirs)
+    if args.init != "search":  # (only when asked: the default start's configuration is as it was)
         sampler.update(init=args.init, search_starts=args.search_starts, search_polish=args.search_polish)
     return {
         "name": "cycles",
@@ -406,10 +406,17 @@ Reproduce: `{command("fit_coverage.py", argv)}`.
 
 
 def _journal_key(record: dict, config: dict) -> str:
+    """A fit's key in the journal: the pass, its truth, the fit's settings and the forward model's
+    code (`rsodb.fit.shape_store.code_fingerprint`), so a change to the renderer fits again."""
     import hashlib
     import json
 
-    text = json.dumps({"file": record["file"], "truth": record["truth"], "config": config}, sort_keys=True)
+    from rsodb.fit.shape_store import code_fingerprint
+
+    text = json.dumps(
+        {"file": record["file"], "truth": record["truth"], "config": config, "forward_model": code_fingerprint()},
+        sort_keys=True,
+    )
     return hashlib.sha256(text.encode()).hexdigest()
 
 
@@ -457,7 +464,7 @@ def run_cycles(args, argv) -> int:
     started = time.perf_counter()
     configs = [cycles_config(record["axis"], args) for record in records]
     # Each finished fit is appended to a journal at once, so a run that is stopped keeps its fits and
-    # the next run with the same settings fits only the passes still missing.
+    # the next run with the same settings and forward-model code fits only the passes still missing.
     journal = directory / "recoveries.jsonl"
     done = load_journal(journal, records, configs)
     if done:

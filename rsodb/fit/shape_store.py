@@ -33,7 +33,7 @@ import tempfile
 
 import numpy as np
 
-__all__ = ["ShapeStore", "scene_fingerprint"]
+__all__ = ["ShapeStore", "code_fingerprint", "scene_fingerprint"]
 
 # Modules whose classes and behaviour a stored cache depends on.
 _CODE_MODULES = (
@@ -48,7 +48,9 @@ _IN_MEMORY = 4
 _MEMORY: OrderedDict = OrderedDict()
 
 
-def _code_fingerprint() -> str:
+def code_fingerprint() -> str:
+    """SHA-256 of the source of the modules a shape cache is built and evaluated with (the
+    forward model's code): part of every cache's key, so a change to them rebuilds."""
     digest = hashlib.sha256()
     for name in _CODE_MODULES:
         origin = importlib.util.find_spec(name).origin
@@ -95,7 +97,7 @@ class ShapeStore:
         record = {
             "scene": scene_fingerprint(scene),
             "settings": json.loads(json.dumps(dict(settings), sort_keys=True, default=str)),
-            "code": _code_fingerprint(),
+            "code": code_fingerprint(),
         }
         return hashlib.sha256(json.dumps(record, sort_keys=True).encode()).hexdigest()[:32]
 
