@@ -808,8 +808,9 @@ def _horizon_gaps(mesh, corners, normals, raw_bits, directions, band):
     bits count the element unseen (the paper's COSMOS 2502 seen nearly end-on: 0.13-0.30 mag
     too faint). For each blocked node less than ``band`` (a sine, two grid spacings) above an
     element's plane, ``_GAP_PROBES`` rays on each of the rings ``_GAP_RINGS`` grid spacings
-    around it are cast (those above the plane); a node with any of them open is a *gap node*,
-    and at run time (:func:`_lit_classes`) a pair with a gap node among its four nodes is
+    around it are cast (those above the plane); a node with one of them open inside a grid cell
+    whose four nodes are all blocked is a *gap node* (where a node is open, the run time's mixed
+    pairs already cast rays), and at run time (:func:`_lit_classes`) a pair with a gap node among its four nodes is
     decided by rays toward the exact direction.
 
     Returns (gap_ptr, gap_word, gap_mask): CSR by node (d + 1,) of (word, bit mask) of the
@@ -819,6 +820,7 @@ def _horizon_gaps(mesh, corners, normals, raw_bits, directions, band):
     if n_elements == 0 or not _GAP_RINGS:
         return np.zeros(n_directions + 1, np.int64), np.zeros(0, np.int64), np.zeros(0, np.uint64), 0
     raycaster, offset = open3d_scene(mesh), _ray_offset_m(mesh)
+    grid_size = _grid_size_of(directions)
     u, v = orthonormal_basis(directions)
     angles = 2.0 * np.pi * (np.arange(_GAP_PROBES) + 0.5 * np.arange(len(_GAP_RINGS))[:, None]) / _GAP_PROBES
     radius = np.tan(np.array(_GAP_RINGS)[:, None] * _grid_spacing_rad(directions)) * np.ones_like(angles)
@@ -853,8 +855,13 @@ def _horizon_gaps(mesh, corners, normals, raw_bits, directions, band):
             batch = rays[first : first + _MAX_BUILD_RAYS]
             open_[first : first + len(batch)] = ~raycaster.test_occlusions(batch).numpy()
         n_rays += len(rays)
+        # An open probe is a gap only inside a cell whose four nodes are all blocked: where one of
+        # them is open, the pair is a mixed pair and rays decide it already.
+        seen = np.flatnonzero(open_)
+        corners_of = cube_grid_weights(rays[seen, 3:].astype(float), grid_size)[0]
+        shut = ~bits[corners_of, (element[pair[seen]] - begin)[:, None]].any(axis=1)
         gap = np.zeros(len(node), dtype=bool)
-        gap[pair[open_]] = True
+        gap[pair[seen[shut]]] = True
         nodes.append(node[gap])
         elements.append(element[gap])
     node = np.concatenate(nodes) if nodes else np.zeros(0, np.int64)
