@@ -810,8 +810,8 @@ def _horizon_gaps(mesh, corners, normals, raw_bits, directions, band):
     element's plane, ``_GAP_PROBES`` rays on each of the rings ``_GAP_RINGS`` grid spacings
     around it are cast (those above the plane); a node with one of them open inside a grid cell
     whose four nodes are all blocked is a *gap node* (where a node is open, the run time's mixed
-    pairs already cast rays), and at run time (:func:`_lit_classes`) a pair with a gap node among its four nodes is
-    decided by rays toward the exact direction.
+    pairs already cast rays), and at run time (:func:`_lit_classes`) a pair with a gap node
+    among its four nodes is decided by rays toward the exact direction.
 
     Returns (gap_ptr, gap_word, gap_mask): CSR by node (d + 1,) of (word, bit mask) of the
     elements for which the node is a gap node, and the rays cast.
@@ -866,15 +866,13 @@ def _horizon_gaps(mesh, corners, normals, raw_bits, directions, band):
         elements.append(element[gap])
     node = np.concatenate(nodes) if nodes else np.zeros(0, np.int64)
     element = np.concatenate(elements) if elements else np.zeros(0, np.int64)
-    word = element // 64
-    key = np.unique(node.astype(np.int64) * (raw_bits.shape[1] + 1) + word)
-    gap_node, gap_word = key // (raw_bits.shape[1] + 1), key % (raw_bits.shape[1] + 1)
+    # One key per (node, word): the elements of a word that share a gap node share one mask.
+    span = raw_bits.shape[1] + 1
+    packed = node.astype(np.int64) * span + element // 64
+    key = np.unique(packed)
+    gap_node, gap_word = key // span, key % span
     mask = np.zeros(len(key), dtype=np.uint64)
-    np.bitwise_or.at(
-        mask,
-        np.searchsorted(key, node.astype(np.int64) * (raw_bits.shape[1] + 1) + word),
-        np.left_shift(np.uint64(1), (element % 64).astype(np.uint64)),
-    )
+    np.bitwise_or.at(mask, np.searchsorted(key, packed), np.left_shift(np.uint64(1), (element % 64).astype(np.uint64)))
     gap_ptr = np.r_[0, np.cumsum(np.bincount(gap_node, minlength=n_directions))].astype(np.int64)
     return gap_ptr, gap_word.astype(np.int64), mask, n_rays
 
