@@ -64,7 +64,8 @@ def load_scene(model: str, materials=None, panel_pitch_deg: float | None = None)
 def render_pass(stored, scene, attitude, method="auto", accuracy_mag=0.005, n_sub=None, spin_period_s=None):
     """(LightCurveModel, BodyGeometry) of ``scene`` along a stored pass with ``attitude``.
 
-    The geometry comes from the pass's own TLE or OMM (`PassGeometry.from_pass`); each exposure
+    The geometry comes from the pass's own TLE or OMM, or else from a track fitted to its file's
+    Az/El/range columns (`PassGeometry.from_pass`); each exposure
     is integrated over `n_sub` sub-samples (default: 2 deg of rotation each at `spin_period_s`).
     """
     geometry = PassGeometry.from_pass(stored, n_sub=n_sub, spin_period_s=spin_period_s)

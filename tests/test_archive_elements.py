@@ -16,6 +16,7 @@ import ingest
 from ingest.elements import ElementCatalogue, tle_epoch_utc
 from raycast.geometry.orbit import Satellite
 from raycast.geometry.pass_geometry import PassGeometry
+from raycast.geometry.track import ObservedTrack
 from rsodb.archive import Archive
 from rsodb.cli import main
 from tests.conftest import COSMOS2553_JD_PHV, COSMOS2553_PHC, TLES, TOPEX_PHV
@@ -90,10 +91,11 @@ def test_the_real_phc_pass_gets_an_orbit_within_the_stated_age(tmp_path, cosmos2
     assert stored.tle is None and stored.warnings[0].reason.startswith("no orbit:")
     assert main(["show", B_ID, "--archive", str(archive)]) == 0
     assert (
-        "orbit      none: no geometry, render or fit; add one with 'rsodb elements add FILE'" in capsys.readouterr().out
+        "orbit      no elements: the geometry is a track fitted to the file's Az/El/range columns, good within the "
+        "pass; add elements with 'rsodb elements add FILE'" in capsys.readouterr().out
     )
-    with pytest.raises(ValueError, match=f"pass '{B_ID}' carries no orbital elements .* 'rsodb elements add TLE_FILE'"):
-        PassGeometry.from_pass(stored)  # what render and fit say: the command that gives it one
+    # Without elements, render and fit use the track of the file's own columns (tests/test_track.py).
+    assert isinstance(PassGeometry.from_pass(stored, n_sub=1).satellite, ObservedTrack)
 
     # rsodb elements add, with the age stated, for the stored passes.
     assert main(["elements", "add", str(cosmos2553_catalogue), "--archive", str(archive), "--max-age-days", "45"]) == 0

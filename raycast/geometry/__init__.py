@@ -8,9 +8,10 @@ See docs/geometry.md.
 from raycast.geometry import ephemeris
 from raycast.geometry.attitude import ATTITUDE_MODELS, SPIN_AXES, InertialSpin, PrecessingSpin, TorqueFree
 from raycast.geometry.orbit import Satellite
-from raycast.geometry.pass_geometry import BodyGeometry, PassGeometry, choose_n_sub
+from raycast.geometry.pass_geometry import BodyGeometry, PassGeometry, choose_n_sub, orbit_of
 from raycast.geometry.refraction import apparent_elevation_deg, true_elevation_deg
 from raycast.geometry.shadow import sunlit_fraction
+from raycast.geometry.track import ObservedTrack
 
 __all__ = [
     "ephemeris",
@@ -23,6 +24,8 @@ __all__ = [
     "BodyGeometry",
     "PassGeometry",
     "choose_n_sub",
+    "orbit_of",
+    "ObservedTrack",
     "apparent_elevation_deg",
     "true_elevation_deg",
     "sunlit_fraction",

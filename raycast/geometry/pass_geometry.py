@@ -39,6 +39,7 @@ from raycast.geometry.orbit import Satellite
 from raycast.geometry.refraction import apparent_elevation_deg
 from raycast.geometry.rotations import rot_z
 from raycast.geometry.shadow import sunlit_fraction
+from raycast.geometry.track import ObservedTrack
 
 __all__ = [
     "PassGeometry",
@@ -48,6 +49,7 @@ __all__ = [
     "MAX_N_SUB",
     "NODE_SPACING_S",
     "choose_n_sub",
+    "orbit_of",
 ]
 
 DEFAULT_SPIN_PERIOD_S = 10.0
@@ -135,8 +137,9 @@ class PassGeometry:
 
     Attributes
     ----------
-    satellite : Satellite
-        The propagated element set.
+    satellite : Satellite or ObservedTrack
+        The propagated element set, or the track fitted to the file's own Az/El/range columns
+        (`orbit_of`).
     site : Site
         The observer.
     exposure_s : float
@@ -219,8 +222,8 @@ class PassGeometry:
 
         Parameters
         ----------
-        satellite : Satellite
-            The element set to propagate.
+        satellite : Satellite or ObservedTrack
+            The element set to propagate, or a track fitted to a file's Az/El/range columns.
         site : Site
             The observer.
         time_utc : (n,) datetime64 or astropy.time.Time
@@ -243,10 +246,10 @@ class PassGeometry:
             For arguments of the wrong kind or out of range, and for times at which SGP4
             fails (e.g. after the object decayed).
         """
-        if not isinstance(satellite, Satellite):
+        if not isinstance(satellite, (Satellite, ObservedTrack)):
             raise TypeError(
-                f"satellite must be a raycast.geometry.orbit.Satellite, got {type(satellite).__name__}; "
-                "build one with Satellite.from_tle(lines) or Satellite.from_omm(record)"
+                f"satellite must be a raycast.geometry.orbit.Satellite or a raycast.geometry.track.ObservedTrack, "
+                f"got {type(satellite).__name__}; build one with Satellite.from_tle(lines) or Satellite.from_omm(record)"
             )
         if not isinstance(site, Site):
             raise TypeError(
@@ -274,7 +277,7 @@ class PassGeometry:
     def from_pass(
         cls, observed, n_sub: int | None = None, spin_period_s: float | None = None, samples=None
     ) -> PassGeometry:
-        """Geometry at the observed times of a pass, from the element set it carries.
+        """Geometry at the observed times of a pass, from its orbit (`orbit_of`).
 
         Parameters
         ----------
@@ -289,20 +292,9 @@ class PassGeometry:
         -------
         PassGeometry
         """
-        if getattr(observed, "tle", None):
-            satellite = Satellite.from_tle(observed.tle)
-        elif getattr(observed, "omm", None):
-            satellite = Satellite.from_omm(observed.omm)
-        else:
-            name = getattr(observed, "pass_id", None) or getattr(observed, "source_name", observed)
-            raise ValueError(
-                f"pass {name!r} carries no orbital elements (neither a TLE nor an OMM record), so it has no "
-                "geometry: add them to the archive with 'rsodb elements add TLE_FILE', or build a Satellite "
-                "and call PassGeometry.compute"
-            )
         times = observed.time_utc if samples is None else observed.time_utc[np.asarray(samples)]
         return cls.compute(
-            satellite, observed.site, times, observed.exposure_s, n_sub=n_sub, spin_period_s=spin_period_s
+            orbit_of(observed), observed.site, times, observed.exposure_s, n_sub=n_sub, spin_period_s=spin_period_s
         )
 
     # -- views ---------------------------------------------------------------------------
@@ -359,6 +351,38 @@ class PassGeometry:
         return pd.DataFrame(
             {name: getattr(self, name) for name in columns}, index=pd.DatetimeIndex(self.time_utc, name="time_utc")
         )
+
+
+def orbit_of(observed, track=None) -> Satellite | ObservedTrack:
+    """The orbit a pass's geometry comes from: its TLE or OMM, else its own Az/El/range columns.
+
+    Parameters
+    ----------
+    observed : ingest.observation.Pass or rsodb.archive.StoredPass
+        Any object with ``tle`` or ``omm``, or with ``time_utc``, ``az_deg``, ``el_deg``,
+        ``range_km``, ``site`` and ``norad`` (`raycast.geometry.track.ObservedTrack.from_pass`).
+    track : ObservedTrack, optional
+        A track already fitted to this pass (returned as it is when the pass has no elements).
+
+    Raises
+    ------
+    ValueError
+        When the pass has neither elements nor usable Az/El/range columns.
+    """
+    if getattr(observed, "tle", None):
+        return Satellite.from_tle(observed.tle)
+    if getattr(observed, "omm", None):
+        return Satellite.from_omm(observed.omm)
+    if track is not None:
+        return track
+    if getattr(observed, "az_deg", None) is None:
+        name = getattr(observed, "pass_id", None) or getattr(observed, "source_name", observed)
+        raise ValueError(
+            f"pass {name!r} carries no orbital elements (neither a TLE nor an OMM record) and no Az/El/range "
+            "columns, so it has no geometry: add elements with 'rsodb elements add TLE_FILE', or build a "
+            "Satellite and call PassGeometry.compute"
+        )
+    return ObservedTrack.from_pass(observed)
 
 
 # -- the computation ----------------------------------------------------------------------
@@ -419,15 +443,18 @@ def _state_at(satellite: Satellite, site: Site, times: np.ndarray) -> dict:
     rotation is nine multiply-adds over contiguous rows.
     """
     frames = _EarthFrames.at(times)
-    r_teme, v_teme, error = satellite.teme_km(frames.jd_utc_whole, frames.jd_utc_fraction)
-    if np.any(error):
-        first = int(np.flatnonzero(error)[0])
-        raise ValueError(
-            f"SGP4 cannot propagate {satellite.name} (NORAD {satellite.norad}) to {times[first]}: "
-            f"{SGP4_ERRORS[int(error[first])]}; use an element set closer to the observation"
-        )
-    sat_gcrs = _apply(frames.teme_to_gcrs, r_teme.T)
-    vel_gcrs = _apply(frames.teme_to_gcrs, v_teme.T)
+    if isinstance(satellite, ObservedTrack):
+        sat_gcrs, vel_gcrs = satellite.gcrs_state_km(times)
+    else:
+        r_teme, v_teme, error = satellite.teme_km(frames.jd_utc_whole, frames.jd_utc_fraction)
+        if np.any(error):
+            first = int(np.flatnonzero(error)[0])
+            raise ValueError(
+                f"SGP4 cannot propagate {satellite.name} (NORAD {satellite.norad}) to {times[first]}: "
+                f"{SGP4_ERRORS[int(error[first])]}; use an element set closer to the observation"
+            )
+        sat_gcrs = _apply(frames.teme_to_gcrs, r_teme.T)
+        vel_gcrs = _apply(frames.teme_to_gcrs, v_teme.T)
     sat_itrs = frames.gcrs_to_itrs(sat_gcrs)
     sun_itrs = frames.gcrs_to_itrs(frames.sun_gcrs_km)
 

@@ -118,8 +118,9 @@ def read_observation_file(path: str, known_sha256: Container[str] = frozenset())
 # The warning stored with a pass whose file carries no orbital elements when no catalogue is given
 # (the photometer's .phc files); 'rsodb elements add' removes it with the other "no orbit:" notes.
 NO_ELEMENTS = (
-    "no orbit: the file carries no orbital elements, so the pass has no geometry (sidereal period, "
-    "render, fit); give them with 'rsodb ingest --tle FILE' or 'rsodb elements add FILE'"
+    "no orbit: the file carries no orbital elements; its geometry (sidereal period, render, fit) is a "
+    "track fitted to its own Az/El/range columns, good within the pass only; give elements with "
+    "'rsodb ingest --tle FILE' or 'rsodb elements add FILE'"
 )
 
 

@@ -95,7 +95,8 @@ class PassSummary:
         Rows the reader set aside, and warnings about the file's header.
     elements : str
         Where the pass's orbital elements come from: ``"header"`` (the file), ``"catalogue"``
-        (added from a TLE/OMM catalogue) or ``""`` (none: no geometry, render or fit).
+        (added from a TLE/OMM catalogue) or ``""`` (none: the geometry is a track fitted to the
+        file's Az/El/range columns, `raycast.geometry.track`, good within the pass only).
     period_s, period_err_s : float or None
         Spin period and its 1-sigma error from the stored period result the query named
         (``periods_name``, default "default"); None without one.

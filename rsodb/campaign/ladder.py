@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from raycast.geometry.pass_geometry import orbit_of
 from rsodb.campaign.fit_campaign import run_campaigns
 from rsodb.fit.config import PERIODS_PRIOR, FitConfig, read_toml
 from rsodb.fit.model import ATTITUDES
@@ -508,10 +509,17 @@ def run_ladder(
         raise ValueError("the ladder has no rungs; give [ladder] rungs (or [objects.NORAD] rungs) in its configuration")
     failures: dict[str, dict[str, str]] = {o.pass_id: {} for o in observed}
     groups = []
+    orbits: dict[str, str] = {}
     for o, config in planned:
-        if getattr(o, "tle", None) is None and getattr(o, "omm", None) is None:
-            # The geometry needs the orbit: a pass without elements cannot be fitted at all.
-            failures[o.pass_id][config.name] = "the pass carries no TLE or OMM record, so its geometry is unknown"
+        if o.pass_id not in orbits:
+            # The geometry needs an orbit: the pass's elements, or a track fitted to its columns.
+            try:
+                orbit_of(o)
+                orbits[o.pass_id] = ""
+            except ValueError as error:
+                orbits[o.pass_id] = str(error)
+        if orbits[o.pass_id]:
+            failures[o.pass_id][config.name] = orbits[o.pass_id]
         else:
             groups.append((config, [o.pass_id]))
     if not groups:

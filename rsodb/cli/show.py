@@ -220,7 +220,10 @@ def _text(info: dict) -> str:
     elif info["omm"]:
         lines.append(f"OMM        {json.dumps(info['omm'])[:100]}")
     else:
-        lines.append("orbit      none: no geometry, render or fit; add one with 'rsodb elements add FILE'")
+        lines.append(
+            "orbit      no elements: the geometry is a track fitted to the file's Az/El/range columns, "
+            "good within the pass; add elements with 'rsodb elements add FILE'"
+        )
     source = info["elements_source"]
     if isinstance(source, dict):
         lines.append(

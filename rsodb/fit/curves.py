@@ -17,11 +17,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import math
-from types import SimpleNamespace
 
 import numpy as np
 
-from raycast.geometry.pass_geometry import PassGeometry
+from raycast.geometry.pass_geometry import PassGeometry, orbit_of
 from rsodb.fit.likelihood import jitter_of
 from rsodb.fit.selection import usable_samples
 
@@ -101,16 +100,19 @@ class ModelCurve:
 
 
 def geometry_at(observed, time_utc, exposure_s: float, n_sub: int | None, spin_period_s: float | None):
-    """`PassGeometry` of a pass's object and site at any times, with any exposure."""
-    sampling = SimpleNamespace(
-        tle=getattr(observed, "tle", None),
-        omm=getattr(observed, "omm", None),
-        site=observed.site,
-        time_utc=np.asarray(time_utc, dtype="datetime64[ns]"),
-        exposure_s=float(exposure_s),
-        source_name=getattr(observed, "source_name", ""),
+    """`PassGeometry` of a pass's object and site at any times, with any exposure.
+
+    The orbit is the pass's elements, or else a track fitted to its own Az/El/range columns
+    (`raycast.geometry.orbit_of`), which covers only the observed span.
+    """
+    return PassGeometry.compute(
+        orbit_of(observed),
+        observed.site,
+        np.asarray(time_utc, dtype="datetime64[ns]"),
+        float(exposure_s),
+        n_sub=n_sub,
+        spin_period_s=spin_period_s,
     )
-    return PassGeometry.from_pass(sampling, n_sub=n_sub, spin_period_s=spin_period_s)
 
 
 def fine_times(observed, fastest_period_s: float) -> np.ndarray:

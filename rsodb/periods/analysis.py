@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import replace
 import math
 
-from raycast.geometry import PassGeometry
+from raycast.geometry import PassGeometry, Satellite
 from rsodb.periods.lightcurve import LightCurve
 from rsodb.periods.search import PeriodResult, PeriodSettings, find_period
 from rsodb.periods.synodic import SynodicCorrection
@@ -36,6 +36,8 @@ def analyse_pass(pass_, settings: PeriodSettings | None = None, *, geometry: boo
         pass_geometry = PassGeometry.from_pass(pass_, n_sub=1)
     except (ValueError, TypeError) as error:
         return replace(result, synodic_note=f"no geometry: {error}")
+    # Without elements the geometry is a track fitted to the file's Az/El/range columns: say so.
+    note = "" if isinstance(pass_geometry.satellite, Satellite) else f"geometry: {pass_geometry.satellite.description}"
     return replace(
-        result, synodic=SynodicCorrection.from_geometry(result.best_period_s, pass_geometry), synodic_note=""
+        result, synodic=SynodicCorrection.from_geometry(result.best_period_s, pass_geometry), synodic_note=note
     )

@@ -251,7 +251,8 @@ class PeriodResult:
     synodic : SynodicCorrection or None
         The phase-angle-bisector correction; None without geometry.
     synodic_note : str
-        Why `synodic` is missing, if it is.
+        Why `synodic` is missing, if it is; or where its geometry came from when not from
+        orbital elements ("geometry: track fitted to the file's Az/El/range columns ...").
     settings : PeriodSettings
     method : str
     epoch_utc : numpy.datetime64 or None
