@@ -16,7 +16,7 @@ from rsodb.fit.config import FitConfig
 from rsodb.fit.coverage import inject, window
 from rsodb.fit.runner import FitProblem
 from rsodb.report.index_page import build_index
-from tests.conftest import COSMOS2553_PHC, TOPEX_PHV
+from tests.conftest import TOPEX_PHV
 
 TRUTH = {
     "spin_period_s": 9.86,
@@ -113,15 +113,28 @@ def test_campaign_needs_a_selection(archive, capsys):
     assert "rsodb campaign: error:" in capsys.readouterr().err
 
 
-def test_passes_without_orbital_elements_are_named_not_sent_to_dask(tmp_path):
-    # issue 19: the main job printed Dask's "Compute Failed" tracebacks for the .phc passes,
-    # which carry no elements, and its index showed "-" for them with no reason.
+def _csv_without_orbit(path, start_utc: str) -> None:
+    """A CSV light curve with neither elements nor Az/El/range columns: no geometry at all."""
+    times = np.datetime64(start_utc) + np.arange(40) * np.timedelta64(1, "s")
+    rows = "".join(f"{t}Z,{5 + 0.1 * np.sin(k):.3f},0.02\n" for k, t in enumerate(times))
+    path.write_text("# object = 51511\n# band = V\n# exposure_s = 1\n# site = Uzhhorod\ntime_utc,mag,mag_err\n" + rows)
+
+
+def test_passes_without_an_orbit_are_named_not_sent_to_dask(tmp_path):
+    # issue 19: the main job printed Dask's "Compute Failed" tracebacks for passes without
+    # elements, and its index showed "-" for them with no reason. A .phc pass now has the track
+    # of its Az/El/range columns (tests/test_track.py); a table with neither has no orbit.
+    files = [tmp_path / "a.csv", tmp_path / "b.csv"]
+    _csv_without_orbit(files[0], "2025-01-30T17:19:41")
+    _csv_without_orbit(files[1], "2025-01-31T17:19:41")
     archive = Archive(tmp_path / "archive")
-    archive.ingest([COSMOS2553_PHC], progress=False)
+    archive.ingest(files, progress=False)
     ids = [row.pass_id for row in archive.summaries(51511)]
+    assert len(ids) == 2
     (outcome,) = run_campaigns(archive, [(FitConfig.from_dict(FIT), ids)], progress=False)
     assert outcome.scheduler == "nothing to run"  # no cluster was started
     assert outcome.failed == tuple((pass_id, NO_ORBIT) for pass_id in ids) and outcome.fitted == ()
     missing = {pass_id: ("fits", error) for pass_id, error in outcome.failed}
     page = build_index(archive, [], "camp", missing).to_html()
-    assert page.count("not fitted: no orbital elements") == 2 and "rsodb elements add" in page
+    assert page.count("not fitted: no orbital elements and no Az/El/range columns") == 2
+    assert "rsodb elements add" in page

@@ -448,7 +448,11 @@ def test_from_pass_uses_the_pass_elements_site_times_and_exposure():
         (dict(exposure_s=-0.1), ValueError, "exposure_s=-0.1 must be a finite number of seconds >= 0"),
         (dict(exposure_s="fast"), ValueError, "'fast' is not a number of seconds"),
         (dict(n_sub=0), ValueError, "n_sub=0 must be a whole number from 1 to 4096"),
-        (dict(satellite=TOPEX_TLE), TypeError, "satellite must be a raycast.geometry.orbit.Satellite or a raycast.geometry.track.ObservedTrack, got tuple"),
+        (
+            dict(satellite=TOPEX_TLE),
+            TypeError,
+            "satellite must be a raycast.geometry.orbit.Satellite or a raycast.geometry.track.ObservedTrack, got tuple",
+        ),
         (dict(site=(48.5, 22.4)), TypeError, "site must be a ingest.site.Site, got tuple"),
     ],
 )

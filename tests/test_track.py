@@ -73,7 +73,9 @@ def test_the_jd_file_s_columns_contradict_its_own_header_tle(shared_data):
     """A fact about that file the phc track brings out: its Az/El/range columns are not the orbit its
     header TLE (confirmed by the phc pass above) describes. The fit uses the TLE."""
     (observed,) = ingest.read_file(COSMOS2553_JD_PHV)
-    from_columns = PassGeometry.compute(ObservedTrack.from_pass(observed), observed.site, observed.time_utc, 0.0, n_sub=1)
+    from_columns = PassGeometry.compute(
+        ObservedTrack.from_pass(observed), observed.site, observed.time_utc, 0.0, n_sub=1
+    )
     from_tle = PassGeometry.from_pass(observed, n_sub=1)
     assert isinstance(from_tle.satellite, Satellite)
     # Measured: 10.8 deg between the lines of sight (median), 8.0 deg between the orbital planes.

@@ -22,6 +22,7 @@ import time
 
 from tqdm.auto import tqdm
 
+from raycast.geometry.pass_geometry import orbit_of
 from rsodb.archive import Archive
 from rsodb.fit.config import FitConfig
 from rsodb.fit.runner import fit_pass
@@ -29,11 +30,23 @@ from rsodb.pool import default_processes
 
 __all__ = ["CampaignOutcome", "run_campaign", "run_campaigns", "select_passes", "NO_ORBIT"]
 
-# Why a pass without orbital elements is not fitted (CampaignOutcome.failed, the reports' index).
+# Why a pass without an orbit is not fitted (CampaignOutcome.failed, the reports' index): it has
+# no orbital elements and no Az/El/range columns to fit a track to (`raycast.geometry.orbit_of`).
 NO_ORBIT = (
-    "no orbital elements, so no pass geometry to fit: add them with 'rsodb elements add TLE_FILE' "
-    "(or ingest the file with --tle TLE_FILE)"
+    "no orbital elements and no Az/El/range columns, so no pass geometry to fit: add elements with "
+    "'rsodb elements add TLE_FILE' (or ingest the file with --tle TLE_FILE)"
 )
+
+
+def _has_orbit(archive: Archive, pass_id: str) -> bool:
+    """Whether a stored pass has a geometry: elements, or a track of its Az/El/range columns."""
+    if archive.summary(pass_id).elements:
+        return True
+    try:
+        orbit_of(archive.get(pass_id))
+    except ValueError:
+        return False
+    return True
 
 
 @dataclass(frozen=True)
@@ -192,9 +205,9 @@ def run_campaigns(
     for config, pass_ids in groups:
         config = config.replace(sampler={"processes": 1})
         done = [] if restart else [p for p in pass_ids if config.name in archive.result_names(p, "fits")]
-        # A pass without orbital elements has no geometry: said here, in one line, rather than
-        # as a task failing on a worker (whose traceback Dask prints in the client's terminal).
-        unfit = [(p, NO_ORBIT) for p in pass_ids if p not in done and not archive.summary(p).elements]
+        # A pass without an orbit has no geometry: said here, in one line, rather than as a task
+        # failing on a worker (whose traceback Dask prints in the client's terminal).
+        unfit = [(p, NO_ORBIT) for p in pass_ids if p not in done and not _has_orbit(archive, p)]
         todo = [p for p in pass_ids if p not in done and p not in dict(unfit)]
         if restart:
             for pass_id in todo:

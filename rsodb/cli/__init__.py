@@ -26,6 +26,7 @@ COMMAND_MODULES = [
     "render",
     "report",
     "fit",
+    "fit_joint",
     "campaign",
     "ladder",
     "pipeline",

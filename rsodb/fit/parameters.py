@@ -15,7 +15,7 @@ posterior that straddles 0/360 deg is reported as one interval, not two half-mod
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 
 import numpy as np
@@ -97,13 +97,21 @@ KNOWN: Mapping[str, Known] = MappingProxyType(
         "jitter_mag": Known(
             "s_jit", "mag", None, Uniform(0.0, 1.0), "extra Gaussian scatter added in quadrature to the observed errors"
         ),
+        "spin_period_rate_s_per_day": Known(
+            "dP/dt",
+            "s/day",
+            None,
+            Uniform(-1.0, 1.0),
+            "change of the spin period per day between the passes of a joint fit (rsodb.fit.joint)",
+        ),
     }
 )
 
 
 def describe(name: str) -> Known:
     """What the project knows about a parameter: its `KNOWN` entry, or, for another name ending
-    in ``_deg``, an articulation angle of a mesh model (``[model] articulations``).
+    in ``_deg``, an articulation angle of a mesh model (``[model] articulations``), or, for
+    ``NAME@K``, parameter NAME of pass K of a joint fit (`rsodb.fit.joint`).
 
     Raises
     ------
@@ -112,6 +120,10 @@ def describe(name: str) -> Known:
     """
     if name in KNOWN:
         return KNOWN[name]
+    base, at, index = name.rpartition("@") if isinstance(name, str) else ("", "", "")
+    if at and index.isdigit() and int(index) >= 1 and "@" not in base:
+        known = describe(base)
+        return replace(known, label=f"{known.label}@{index}", description=f"{known.description}, of pass {index}")
     if isinstance(name, str) and name.endswith("_deg") and name.isidentifier():
         return Known(
             name.removesuffix("_deg"), "deg", None, Uniform(-180.0, 180.0), "articulation angle of a mesh part"
