@@ -36,10 +36,10 @@ from skyfield.sgp4lib import TEME
 from ingest.site import Site
 from raycast.geometry import ephemeris
 from raycast.geometry.orbit import Satellite
-from raycast.geometry.refraction import apparent_elevation_deg
+from raycast.geometry.refraction import apparent_elevation_deg, true_elevation_deg
 from raycast.geometry.rotations import rot_z
 from raycast.geometry.shadow import sunlit_fraction
-from raycast.geometry.track import ObservedTrack
+from raycast.geometry.track import ObservedTrack, track_site
 
 __all__ = [
     "PassGeometry",
@@ -50,6 +50,8 @@ __all__ = [
     "NODE_SPACING_S",
     "choose_n_sub",
     "orbit_of",
+    "columns_offset_deg",
+    "COLUMNS_AGREE_DEG",
 ]
 
 DEFAULT_SPIN_PERIOD_S = 10.0
@@ -383,6 +385,38 @@ def orbit_of(observed, track=None) -> Satellite | ObservedTrack:
             "Satellite and call PassGeometry.compute"
         )
     return ObservedTrack.from_pass(observed)
+
+
+# Lines of sight of a file's columns and of its elements further apart than this (median) mean
+# the columns were not computed from that orbit (PyEphem from the same TLE: ~0.002 deg).
+COLUMNS_AGREE_DEG = 0.1
+
+
+def columns_offset_deg(observed) -> tuple[float, float] | None:
+    """(median, max) angle, degrees, between the lines of sight of a pass's own Az/El columns and
+    those of its orbital elements at the same times; None without elements or columns.
+
+    The columns are taken for the site they were computed for (`raycast.geometry.track.track_site`)
+    with PyEphem's refraction removed. The lab's writers compute them from the header TLE, so a
+    median above `COLUMNS_AGREE_DEG` says they describe another orbit (the geometry uses the
+    elements).
+    """
+    if not (getattr(observed, "tle", None) or getattr(observed, "omm", None)):
+        return None
+    az, el = np.asarray(observed.az_deg, dtype=float), np.asarray(observed.el_deg, dtype=float)
+    usable = np.isfinite(az) & np.isfinite(el)
+    if not usable.any():
+        return None
+    geometry = PassGeometry.compute(orbit_of(observed), track_site(observed), observed.time_utc[usable], 0.0, n_sub=1)
+
+    def unit(az_deg, el_deg):
+        a, e = np.radians(az_deg), np.radians(el_deg)
+        return np.stack([np.cos(e) * np.sin(a), np.cos(e) * np.cos(a), np.sin(e)], axis=-1)
+
+    columns = unit(az[usable], true_elevation_deg(el[usable]))
+    cosine = np.clip(np.sum(columns * unit(geometry.az_deg, geometry.el_deg), axis=-1), -1.0, 1.0)
+    angle = np.degrees(np.arccos(cosine))
+    return float(np.median(angle)), float(angle.max())
 
 
 # -- the computation ----------------------------------------------------------------------

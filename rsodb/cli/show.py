@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 
+from raycast.geometry.pass_geometry import COLUMNS_AGREE_DEG, columns_offset_deg
 import rsodb
 from rsodb.cli.archive_options import add_archive_option, fail, open_archive
 
@@ -111,6 +112,7 @@ def describe(stored, results: dict[str, dict[str, dict]], duplicates=()) -> dict
         "elements_source": dict(stored.elements_source)
         if stored.elements_source
         else ("file header" if stored.tle or stored.omm else None),
+        "columns_vs_elements_deg": _columns_offset(stored),
         "source_name": stored.source_name,
         "source_sha256": stored.source_sha256,
         "source_format": stored.source_format,
@@ -180,6 +182,15 @@ def _table_lines(key: str, rows: list[dict]) -> list[str]:
     return lines
 
 
+def _columns_offset(stored) -> dict | None:
+    """How far the file's own Az/El lines of sight lie from its elements' (None: nothing to compare)."""
+    try:
+        offset = columns_offset_deg(stored)
+    except ValueError:  # elements SGP4 cannot propagate to the pass: said where the geometry is used
+        return None
+    return None if offset is None else {"median": offset[0], "max": offset[1]}
+
+
 def _text(info: dict) -> str:
     site = info["site"]
     state = "current" if info["superseded_by"] is None else f"superseded by {info['superseded_by']}"
@@ -224,6 +235,18 @@ def _text(info: dict) -> str:
             "orbit      no elements: the geometry is a track fitted to the file's Az/El/range columns, "
             "good within the pass; add elements with 'rsodb elements add FILE'"
         )
+    offset = info["columns_vs_elements_deg"]
+    if offset is not None:
+        if offset["median"] <= COLUMNS_AGREE_DEG:
+            lines.append(
+                f"columns    the file's Az/El agree with the elements: {offset['median']:.4f} deg median, "
+                f"{offset['max']:.4f} deg at most"
+            )
+        else:
+            lines.append(
+                f"columns    the file's Az/El DISAGREE with the elements by {offset['median']:.2f} deg (median; "
+                f"{offset['max']:.2f} at most): they were not computed from this orbit; the geometry uses the elements"
+            )
     source = info["elements_source"]
     if isinstance(source, dict):
         lines.append(
