@@ -145,6 +145,27 @@ def test_material_scalars_rescale_the_scene_exactly():
     assert scaled.supports({"albedo_scale": 2.0}) and not scaled.supports({"albedo_scale": 2.6})
 
 
+def _two_box_scene():
+    from raycast.renderer.brdf import GGX, Lambertian
+    from raycast.renderer.scene import Part, Scene
+
+    parts = [Part.box("a", (1, 1, 1), "paint"), Part.box("b", (0.5, 0.5, 0.5), "foil", center_m=(1.0, 0, 0))]
+    return Scene.from_parts(parts, {"paint": Lambertian(0.4), "foil": GGX(0.5, 0.3)})
+
+
+def test_a_free_roughness_builds_the_cache_for_the_smoothest_lobe():
+    # A fit with a free roughness on a mesh stopped with an AttributeError in the cache build
+    # (the solar-disk samples were asked of the scene instead of its BRDFs).
+    from rsodb.fit.shapes import MaterialScalars, Shape, brightness_for
+
+    shape = Shape(_two_box_scene, {}, False, "two boxes")
+    brightness, names = brightness_for(shape, {"roughness": (0.05, 0.6)}, {}, accuracy_mag=0.02)
+    assert isinstance(brightness, MaterialScalars) and names == ("roughness",)
+    sun, obs = np.array([[0.0, 0.6, 0.8]]), np.array([[0.6, 0.0, 0.8]])
+    smooth, rough = (float(brightness.intensity(sun, obs, roughness=r)[0]) for r in (0.1, 0.6))
+    assert smooth > 0 and rough > 0 and smooth != rough
+
+
 def test_inject_builds_a_pass_from_the_model(topex_window, geometry):
     model = SpinStateModel(geometry, ConvexFacets.ellipsoid(), "precessing")
     synthetic = inject(topex_window, model, TRUTH, noise_mag=0.02, rng=np.random.default_rng(0), offset_mag=1.5)

@@ -317,7 +317,8 @@ def _build_cache(scene, grid: tuple, smoothest_roughness: float | None, accuracy
         alpha = smoothest_roughness**2
         options = {
             "normal_step_deg": float(np.clip(math.degrees(alpha) / 2.0, 0.5, 3.0)),
-            "sun_samples": sun_samples_for(smooth, accuracy_mag),
+            # The solar-disk samples of the sharpest lobe the prior allows, for every material.
+            "sun_samples": max(sun_samples_for(b, accuracy_mag) for b in smooth.brdfs),
         }
     articulation_grid = {name: list(values) for name, values in grid} or None
     return SceneCache.build(
