@@ -23,7 +23,7 @@ down. On the TOPEX file of 2024-07-30, which also carries its TLE, the track lie
 arc-seconds (tests/test_track.py; docs/geometry.md).
 
 A track is good where it was observed: `gcrs_state_km` refuses times more than
-`MARGIN_FRACTION` of the span (plus `MARGIN_S`) outside it.
+`MARGIN_FRACTION` of the span, plus `MARGIN_S`, plus half an exposure outside it.
 """
 
 from __future__ import annotations
@@ -82,6 +82,8 @@ class ObservedTrack:
         Rows fitted, and rows set aside as outliers.
     site : Site
         The site the columns were computed for.
+    margin_s : float
+        How far outside `span_s` the track may be used, seconds.
     """
 
     name: str
@@ -93,6 +95,7 @@ class ObservedTrack:
     n_rows: int
     n_clipped: int
     site: Site
+    margin_s: float = MARGIN_S
 
     tle = None
     omm = None
@@ -122,6 +125,7 @@ class ObservedTrack:
             name=str(getattr(observed, "name", "") or f"NORAD {observed.norad}"),
             norad=int(observed.norad),
             label=str(label),
+            exposure_s=float(getattr(observed, "exposure_s", 0.0) or 0.0),
         )
 
     @classmethod
@@ -136,6 +140,7 @@ class ObservedTrack:
         norad: int = 0,
         refracted: bool = True,
         label: str = "the track",
+        exposure_s: float = 0.0,
     ) -> ObservedTrack:
         """Fit a track to (n,) times and topocentric columns.
 
@@ -151,6 +156,8 @@ class ObservedTrack:
             Whether `el_deg` includes PyEphem's refraction (the lab's writers: yes).
         label : str
             Names the pass in errors.
+        exposure_s : float
+            The rows' exposure: the track reaches half of it beyond the span (exposure sub-samples).
         """
         # Imported here: pass_geometry imports this module.
         from raycast.geometry.pass_geometry import _EarthFrames
@@ -203,6 +210,7 @@ class ObservedTrack:
             n_rows=int(keep.sum()),
             n_clipped=int((~keep).sum()),
             site=site,
+            margin_s=MARGIN_S + MARGIN_FRACTION * float(span[1] - span[0]) + 0.5 * max(exposure_s, 0.0),
         )
 
     # -- propagation ---------------------------------------------------------------------
@@ -230,8 +238,7 @@ class ObservedTrack:
         """
         t_s = (np.asarray(times, dtype="datetime64[ns]") - self.epoch_utc) / np.timedelta64(1, "s")
         first, last = self.span_s
-        margin = MARGIN_S + MARGIN_FRACTION * (last - first)
-        outside = (t_s < first - margin) | (t_s > last + margin)
+        outside = (t_s < first - self.margin_s) | (t_s > last + self.margin_s)
         if np.any(outside):
             bad = np.asarray(times)[np.flatnonzero(outside)[0]]
             raise ValueError(
