@@ -18,7 +18,7 @@ import pytest
 import ingest
 from raycast.geometry import ObservedTrack, PassGeometry, orbit_of
 from raycast.geometry.orbit import Satellite
-from raycast.geometry.pass_geometry import COLUMNS_AGREE_DEG, columns_offset_deg
+from raycast.geometry.pass_geometry import COLUMNS_AGREE_DEG, columns_offset_deg, track_of
 from rsodb.cli import main
 from rsodb.fit.curves import geometry_at
 from tests.conftest import COSMOS2553_JD_PHV, COSMOS2553_PHC, TOPEX_PHV
@@ -35,7 +35,7 @@ def topex(shared_data):
 
 
 def test_the_track_of_the_topex_columns_is_where_sgp4_puts_topex(topex):
-    track = ObservedTrack.from_pass(topex)
+    track = track_of(topex)
     assert track.rms_km < 0.03 and track.n_clipped == 0 and track.degree <= 8  # the columns' rounding
     assert track.site.name == "Derenivka" and track.n_rows == topex.time_utc.size
     from_track = PassGeometry.compute(track, topex.site, topex.time_utc, topex.exposure_s, n_sub=2)
@@ -76,9 +76,7 @@ def test_the_jd_file_s_columns_contradict_its_own_header_tle(shared_data):
     """A fact about that file the phc track brings out: its Az/El/range columns are not the orbit its
     header TLE (confirmed by the phc pass above) describes. The fit uses the TLE."""
     (observed,) = ingest.read_file(COSMOS2553_JD_PHV)
-    from_columns = PassGeometry.compute(
-        ObservedTrack.from_pass(observed), observed.site, observed.time_utc, 0.0, n_sub=1
-    )
+    from_columns = PassGeometry.compute(track_of(observed), observed.site, observed.time_utc, 0.0, n_sub=1)
     from_tle = PassGeometry.from_pass(observed, n_sub=1)
     assert isinstance(from_tle.satellite, Satellite)
     # Measured: 10.8 deg between the lines of sight (median), 8.0 deg between the orbital planes.
@@ -107,9 +105,9 @@ def test_a_damaged_row_is_set_aside_and_the_track_holds(topex):
     az = topex.az_deg.copy()
     az[1000] += 5.0  # one row's azimuth off by 5 deg: ~270 km at that range
     damaged = dataclasses.replace(topex, az_deg=az)
-    track = ObservedTrack.from_pass(damaged)
+    track = track_of(damaged)
     assert track.n_clipped == 1 and "1 rows set aside" in track.description
-    clean = ObservedTrack.from_pass(topex)
+    clean = track_of(topex)
     times = topex.time_utc[::97]
     position, _ = track.gcrs_state_km(times)
     reference, _ = clean.gcrs_state_km(times)
@@ -117,7 +115,7 @@ def test_a_damaged_row_is_set_aside_and_the_track_holds(topex):
 
 
 def test_a_track_is_refused_outside_its_span_and_for_rough_or_missing_columns(topex):
-    track = ObservedTrack.from_pass(topex)
+    track = track_of(topex)
     inside = topex.time_utc[-1] + np.timedelta64(10, "s")  # within the margin (2 s + 5% of 464 s)
     assert track.gcrs_state_km(np.array([inside]))[0].shape == (3, 1)
     later = topex.time_utc[-1] + np.timedelta64(60, "s")
@@ -128,7 +126,7 @@ def test_a_track_is_refused_outside_its_span_and_for_rough_or_missing_columns(to
     rng = np.random.default_rng(3)
     rough = dataclasses.replace(topex, el_deg=topex.el_deg + rng.normal(0.0, 0.5, topex.el_deg.size))
     with pytest.raises(ValueError, match="do not describe a smooth orbit"):
-        ObservedTrack.from_pass(rough)
+        track_of(rough)
     empty = dataclasses.replace(topex, tle=None, range_km=np.full(topex.range_km.size, np.nan))
     with pytest.raises(ValueError, match="has 0 rows with Az, El and range .* 'rsodb elements add TLE_FILE'"):
         orbit_of(empty)

@@ -8,7 +8,7 @@ See docs/geometry.md.
 from raycast.geometry import ephemeris
 from raycast.geometry.attitude import ATTITUDE_MODELS, SPIN_AXES, InertialSpin, PrecessingSpin, TorqueFree
 from raycast.geometry.orbit import Satellite
-from raycast.geometry.pass_geometry import BodyGeometry, PassGeometry, choose_n_sub, orbit_of
+from raycast.geometry.pass_geometry import BodyGeometry, PassGeometry, choose_n_sub, orbit_of, track_of
 from raycast.geometry.refraction import apparent_elevation_deg, true_elevation_deg
 from raycast.geometry.shadow import sunlit_fraction
 from raycast.geometry.track import ObservedTrack
@@ -25,6 +25,7 @@ __all__ = [
     "PassGeometry",
     "choose_n_sub",
     "orbit_of",
+    "track_of",
     "ObservedTrack",
     "apparent_elevation_deg",
     "true_elevation_deg",

@@ -50,6 +50,7 @@ __all__ = [
     "NODE_SPACING_S",
     "choose_n_sub",
     "orbit_of",
+    "track_of",
     "columns_offset_deg",
     "COLUMNS_AGREE_DEG",
 ]
@@ -362,7 +363,7 @@ def orbit_of(observed, track=None) -> Satellite | ObservedTrack:
     ----------
     observed : ingest.observation.Pass or rsodb.archive.StoredPass
         Any object with ``tle`` or ``omm``, or with ``time_utc``, ``az_deg``, ``el_deg``,
-        ``range_km``, ``site`` and ``norad`` (`raycast.geometry.track.ObservedTrack.from_pass`).
+        ``range_km``, ``site`` and ``norad`` (`track_of`).
     track : ObservedTrack, optional
         A track already fitted to this pass (returned as it is when the pass has no elements).
 
@@ -384,7 +385,45 @@ def orbit_of(observed, track=None) -> Satellite | ObservedTrack:
             "columns, so it has no geometry: add elements with 'rsodb elements add TLE_FILE', or build a "
             "Satellite and call PassGeometry.compute"
         )
-    return ObservedTrack.from_pass(observed)
+    return track_of(observed)
+
+
+def track_of(observed, refracted: bool = True) -> ObservedTrack:
+    """The track (`raycast.geometry.track.ObservedTrack`) of a pass's own Az/El/range columns.
+
+    Rows with a non-finite column are skipped; the elevation loses PyEphem's refraction when
+    `refracted` (the lab's writers include it); the columns are taken for the site they were
+    computed for (`track_site`) and rotated into GCRS at each row's time.
+
+    Raises
+    ------
+    ValueError
+        With too few usable rows, or columns that are not a smooth orbit.
+    """
+    label = getattr(observed, "pass_id", None) or getattr(observed, "source_name", "") or "the pass"
+    times = np.asarray(observed.time_utc, dtype="datetime64[ns]")
+    az, el, rg = (np.asarray(a, dtype=float) for a in (observed.az_deg, observed.el_deg, observed.range_km))
+    usable = np.isfinite(az) & np.isfinite(el) & np.isfinite(rg) & (rg > 0.0) & ~np.isnat(times)
+    order = np.flatnonzero(usable)[np.argsort(times[usable], kind="stable")]
+    times, az, el, rg = times[order], az[order], el[order], rg[order]
+    site = track_site(observed)
+    if times.size:
+        if refracted:
+            el = true_elevation_deg(el)
+        a, e = np.radians(az), np.radians(el)
+        enu = np.array([np.cos(e) * np.sin(a), np.cos(e) * np.cos(a), np.sin(e)]) * rg
+        gcrs = _EarthFrames.at(times).itrs_to_gcrs(site.itrs_km[:, None] + site.enu_itrs @ enu)
+    else:
+        gcrs = np.zeros((3, 0))
+    return ObservedTrack.fit(
+        times,
+        gcrs,
+        site,
+        name=str(getattr(observed, "name", "") or f"NORAD {observed.norad}"),
+        norad=int(observed.norad),
+        label=str(label),
+        exposure_s=float(getattr(observed, "exposure_s", 0.0) or 0.0),
+    )
 
 
 # Lines of sight of a file's columns and of its elements further apart than this (median) mean

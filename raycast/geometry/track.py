@@ -33,7 +33,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from ingest.site import PRESETS, Site
-from raycast.geometry.refraction import true_elevation_deg
 
 __all__ = ["ObservedTrack", "MARGIN_S", "MARGIN_FRACTION", "MAX_TRACK_RMS_KM", "track_site"]
 
@@ -62,7 +61,7 @@ def track_site(observed) -> Site:
 class ObservedTrack:
     """A satellite's GCRS orbit arc fitted to an observation file's Az/El/Range columns.
 
-    Build it with `from_pass` or `from_columns`; it is immutable.
+    Build it with `raycast.geometry.pass_geometry.track_of(pass)` (or `fit`); it is immutable.
 
     Attributes
     ----------
@@ -106,94 +105,59 @@ class ObservedTrack:
 
     # -- construction --------------------------------------------------------------------
     @classmethod
-    def from_pass(cls, observed) -> ObservedTrack:
-        """The track of a pass's own Az/El/Range columns (`ingest.observation.Pass` or a stored pass).
-
-        Raises
-        ------
-        ValueError
-            When the pass has too few rows with all three columns, or they do not describe a
-            smooth orbit.
-        """
-        label = getattr(observed, "pass_id", None) or getattr(observed, "source_name", "") or "the pass"
-        return cls.from_columns(
-            observed.time_utc,
-            observed.az_deg,
-            observed.el_deg,
-            observed.range_km,
-            track_site(observed),
-            name=str(getattr(observed, "name", "") or f"NORAD {observed.norad}"),
-            norad=int(observed.norad),
-            label=str(label),
-            exposure_s=float(getattr(observed, "exposure_s", 0.0) or 0.0),
-        )
-
-    @classmethod
-    def from_columns(
+    def fit(
         cls,
-        time_utc,
-        az_deg,
-        el_deg,
-        range_km,
+        time_utc: np.ndarray,
+        gcrs_km: np.ndarray,
         site: Site,
         name: str = "",
         norad: int = 0,
-        refracted: bool = True,
         label: str = "the track",
         exposure_s: float = 0.0,
     ) -> ObservedTrack:
-        """Fit a track to (n,) times and topocentric columns.
+        """Fit a track to (n,) sorted times and (3, n) GCRS positions, km.
+
+        `raycast.geometry.pass_geometry.track_of(pass)` builds the positions from a pass's
+        Az/El/range columns and calls this.
 
         Parameters
         ----------
-        time_utc : (n,) datetime64
-        az_deg, el_deg, range_km : (n,) float
-            Azimuth (from north through east), elevation and range; rows with a non-finite
-            value are skipped.
+        time_utc : (n,) datetime64[ns]
+        gcrs_km : (3, n) float
         site : Site
-            Where the columns were computed for.
-        refracted : bool
-            Whether `el_deg` includes PyEphem's refraction (the lab's writers: yes).
+            The site the positions were computed from (recorded).
+        name, norad : str, int
+            The object.
         label : str
             Names the pass in errors.
         exposure_s : float
             The rows' exposure: the track reaches half of it beyond the span (exposure sub-samples).
-        """
-        # Imported here: pass_geometry imports this module.
-        from raycast.geometry.pass_geometry import _EarthFrames
 
+        Raises
+        ------
+        ValueError
+            With too few rows, no time span, or positions that are not a smooth orbit.
+        """
         times = np.asarray(time_utc, dtype="datetime64[ns]")
-        az, el, rg = (np.asarray(a, dtype=float) for a in (az_deg, el_deg, range_km))
-        usable = np.isfinite(az) & np.isfinite(el) & np.isfinite(rg) & (rg > 0.0) & ~np.isnat(times)
-        if int(usable.sum()) < _MIN_ROWS:
+        if times.size < _MIN_ROWS:
             raise ValueError(
-                f"{label} has {int(usable.sum())} rows with Az, El and range (at least {_MIN_ROWS} are needed "
+                f"{label} has {times.size} rows with Az, El and range (at least {_MIN_ROWS} are needed "
                 "for a track), and no orbital elements: it has no geometry; give elements with "
                 "'rsodb elements add TLE_FILE'"
             )
-        times, az, el, rg = times[usable], az[usable], el[usable], rg[usable]
-        order = np.argsort(times, kind="stable")
-        times, az, el, rg = times[order], az[order], el[order], rg[order]
-        if refracted:
-            el = true_elevation_deg(el)
-        a, e = np.radians(az), np.radians(el)
-        enu = np.array([np.cos(e) * np.sin(a), np.cos(e) * np.cos(a), np.sin(e)]) * rg
-        itrs = site.itrs_km[:, None] + site.enu_itrs @ enu
-        gcrs = _EarthFrames.at(times).itrs_to_gcrs(itrs)
-
         epoch = times[0]
         t_s = (times - epoch) / np.timedelta64(1, "s")
         span = np.array([t_s[0], t_s[-1]])
         if span[1] - span[0] <= 0.0:
             raise ValueError(f"{label}: its Az/El/range rows span no time, so they give no track")
         keep = np.ones(t_s.shape, dtype=bool)
-        coefficients, residual = _fit(t_s, gcrs, span, keep)
+        coefficients, residual = _fit(t_s, gcrs_km, span, keep)
         # Per-axis sigma from the median 3-D residual (1.538 sigma for Gaussian errors), at least 1 m.
         sigma = max(float(np.median(residual)) / _MEDIAN_3D, 1e-3)
         clipped = residual <= _CLIP_SIGMA * sigma
         if int(clipped.sum()) >= _MIN_ROWS and not clipped.all():
             keep = clipped
-            coefficients, residual = _fit(t_s, gcrs, span, keep)
+            coefficients, residual = _fit(t_s, gcrs_km, span, keep)
         rms = float(np.sqrt(np.mean(residual[keep] ** 2)))
         if rms > MAX_TRACK_RMS_KM:
             raise ValueError(

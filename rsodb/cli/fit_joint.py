@@ -55,6 +55,7 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # The sampler and the renderer load in seconds; 'rsodb --help' must not wait for them.
     from rsodb.fit.joint import fit_joint, plot_joint
 
     try:

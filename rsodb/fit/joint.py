@@ -37,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from rsodb.fit.config import FitConfig
 from rsodb.fit.curves import pass_curves
 from rsodb.fit.likelihood import jitter_of
 from rsodb.fit.parameters import Parameter, ParameterSpace
@@ -419,8 +420,6 @@ def fit_joint(
         Discard a stored chain of this joint fit.
     progress : bool
     """
-    from rsodb.fit.config import FitConfig
-
     config = config or FitConfig().with_model(attitude="inertial")
     observed = [archive.get(p) for p in pass_ids]
     periods = [load_periods(archive, o.pass_id) for o in observed]
@@ -441,13 +440,12 @@ def fit_joint(
 def plot_joint(result: JointResult, path) -> Path:
     """Each pass's observed magnitudes and the best joint model as a continuous curve over the
     whole pass (the fitted window shaded), one panel per pass; written to `path` (PNG)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    # matplotlib loads in about a second; only drawing needs it.
+    from matplotlib.figure import Figure
 
     n = len(result.curves)
-    figure, axes = plt.subplots(n, 1, figsize=(10, 2.8 * n), squeeze=False)
+    figure = Figure(figsize=(10, 2.8 * n))
+    axes = figure.subplots(n, 1, squeeze=False)
     for axis, (pass_curve, model_curve), item in zip(axes[:, 0], result.curves, result.passes):
         t0 = pass_curve.time_utc[0]
         seconds = (pass_curve.time_utc - t0) / np.timedelta64(1, "s")
@@ -469,5 +467,4 @@ def plot_joint(result: JointResult, path) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     figure.savefig(path, dpi=110)
-    plt.close(figure)
     return path
