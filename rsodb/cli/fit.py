@@ -43,6 +43,13 @@ def register(subparsers) -> None:
     parser.add_argument("pass_id", metavar="PASS", help="pass id (a unique prefix is enough; see 'rsodb ls')")
     add_archive_option(parser)
     add_fit_options(parser)
+    add_sampler_options(parser)
+    parser.add_argument("--plots", metavar="DIR", help="also write corner, light-curve and trace PNGs here")
+    parser.set_defaults(func=run)
+
+
+def add_sampler_options(parser: argparse.ArgumentParser) -> None:
+    """The options of one sampler run that `rsodb fit` and `rsodb fit-joint` share."""
     parser.add_argument("--walkers", type=int, metavar="N", help="number of walkers (overrides the configuration)")
     parser.add_argument("--processes", type=int, metavar="N", help="worker processes (0 = one per core)")
     parser.add_argument("--seed", type=int, metavar="N", help="random seed (overrides the configuration)")
@@ -51,10 +58,8 @@ def register(subparsers) -> None:
         "--time-limit-s", type=float, metavar="S", help="stop sampling after S seconds (rerun continues)"
     )
     parser.add_argument("--restart", action="store_true", help="discard a stored chain of this fit and start again")
-    parser.add_argument("--plots", metavar="DIR", help="also write corner, light-curve and trace PNGs here")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
-    parser.set_defaults(func=run)
 
 
 def add_fit_options(parser: argparse.ArgumentParser) -> None:

@@ -6,7 +6,7 @@ import argparse
 import json
 
 from rsodb.cli.archive_options import add_archive_option, fail, open_archive
-from rsodb.cli.fit import add_fit_options, config_from_args
+from rsodb.cli.fit import add_fit_options, add_sampler_options, config_from_args
 
 __all__ = ["register", "run"]
 
@@ -39,18 +39,9 @@ def register(subparsers) -> None:
     )
     add_archive_option(parser)
     add_fit_options(parser)
+    add_sampler_options(parser)
     parser.add_argument("--no-trend", action="store_true", help="one spin period for every pass (no linear trend)")
-    parser.add_argument("--walkers", type=int, metavar="N", help="number of walkers (overrides the configuration)")
-    parser.add_argument("--processes", type=int, metavar="N", help="worker processes (0 = one per core)")
-    parser.add_argument("--seed", type=int, metavar="N", help="random seed (overrides the configuration)")
-    parser.add_argument("--until-converged", action="store_true", help="sample until converged (--steps caps it)")
-    parser.add_argument(
-        "--time-limit-s", type=float, metavar="S", help="stop sampling after S seconds (rerun continues)"
-    )
-    parser.add_argument("--restart", action="store_true", help="discard a stored chain of this joint fit")
     parser.add_argument("--plot", metavar="FILE.png", help="also draw every pass with the joint best fit")
-    parser.add_argument("--json", action="store_true", help="print the result as JSON")
-    parser.add_argument("--quiet", action="store_true", help="no progress bars")
     parser.set_defaults(func=run)
 
 
