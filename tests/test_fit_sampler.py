@@ -272,3 +272,16 @@ def test_time_limit_stops_sampling_and_a_rerun_continues(tmp_path):
         posterior, settings.replace(time_limit_s=0.0, n_steps=run.n_steps + 10), tmp_path / "t.h5", progress=False
     )
     assert again.resumed_from == run.n_steps and again.n_steps == run.n_steps + 10
+
+
+def test_a_time_limit_also_bounds_the_global_search(tmp_path):
+    # The search ran for 35 min under a 30 min limit on a slow posterior (the TOPEX whole pass with
+    # a free array pitch): the limit now stops it at half its time, and the sampler takes the rest.
+    posterior = make_posterior(delay_s=0.002)
+    settings = SMALL.replace(init="population", search_maxiter=1000, search_popsize=20, n_steps=5000, time_limit_s=2.0)
+    started = time.perf_counter()
+    run = run_sampler(posterior, settings, tmp_path / "s.h5", progress=False)
+    elapsed = time.perf_counter() - started
+    assert run.init["search_stopped"] == "at half the time limit" and run.init["search_generations"] < 1000
+    assert run.stopped.startswith("stopped at the time limit of 2 s") and run.n_steps >= 1
+    assert elapsed < 10.0  # 1000 generations of 40 points at 2 ms each would take 80 s

@@ -286,6 +286,8 @@ class _Evaluator:
     posterior: Any
     search_posterior: Any
     pool: Any = None
+    deadline: float | None = None  # perf_counter time at which a global search stops (None: never)
+    progress: bool = False
     log_prob: Callable = field(init=False)
     cost: Callable = field(init=False)
     map: Callable = field(init=False)
@@ -295,6 +297,9 @@ class _Evaluator:
             self.log_prob, self.cost, self.map = self.posterior, _Cost(self.search_posterior), map
         else:
             self.log_prob, self.cost, self.map = _worker_log_prob, _worker_cost, self.pool.map
+
+    def past_deadline(self) -> bool:
+        return self.deadline is not None and time.perf_counter() >= self.deadline
 
 
 @dataclass(eq=False)
@@ -391,21 +396,35 @@ def _search(posterior, settings: SamplerSettings, rng: np.random.Generator, eval
     """
     space = posterior.space
     bounds = space.bounds
-    result = differential_evolution(
-        evaluator.cost,
-        bounds,
-        maxiter=settings.search_maxiter,
-        popsize=settings.search_popsize,
-        strategy=settings.search_strategy,
-        seed=int(rng.integers(2**31)),
-        polish=False,
-        init="sobol",
-        tol=1e-8,
-        # "deferred" updating evaluates whole generations through `map`: the same search
-        # whether it runs here or in the pool.
-        workers=evaluator.map,
-        updating="deferred",
-    )
+    with tqdm(
+        total=settings.search_maxiter,
+        desc="global search",
+        unit="generation",
+        disable=not evaluator.progress,
+        leave=False,
+    ) as bar:
+
+        def generation_done(intermediate_result) -> bool:
+            # True stops the search: half of a run's time limit is its share (the sampler needs the rest).
+            bar.update(1)
+            return evaluator.past_deadline()
+
+        result = differential_evolution(
+            evaluator.cost,
+            bounds,
+            maxiter=settings.search_maxiter,
+            popsize=settings.search_popsize,
+            strategy=settings.search_strategy,
+            seed=int(rng.integers(2**31)),
+            polish=False,
+            init="sobol",
+            tol=1e-8,
+            # "deferred" updating evaluates whole generations through `map`: the same search
+            # whether it runs here or in the pool.
+            workers=evaluator.map,
+            updating="deferred",
+            callback=generation_done,
+        )
     if result.fun >= _IMPOSSIBLE:
         raise RuntimeError("the global search found no point where the posterior is non-zero; widen the priors")
     # Polish here, in this process (scipy's own polish would call the pool-only cost function).
@@ -486,6 +505,7 @@ def _search_info(method, result, best, best_cost, evaluations) -> dict:
         "search_best_log_prob": float(-best_cost),
         "search_best": best.tolist(),
         "search_generations": int(result.nit),
+        "search_stopped": "at half the time limit" if "callback" in str(getattr(result, "message", "")) else "",
     }
 
 
@@ -727,7 +747,9 @@ def run_sampler(
         raise ValueError("the search posterior must have the same free parameters as the posterior")
     pool = _open_pool(posterior, search_posterior, settings.n_processes) if remaining else None
     try:
-        evaluator = _Evaluator(posterior, search_posterior, pool)
+        # The global search may take half of the time limit; sampling stops at the whole of it.
+        deadline = started + 0.5 * settings.time_limit_s if settings.time_limit_s else None
+        evaluator = _Evaluator(posterior, search_posterior, pool, deadline, progress)
         sampler = None
         if stored == 0:
             rng = np.random.default_rng(settings.seed)
