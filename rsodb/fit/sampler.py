@@ -19,7 +19,8 @@
 - ``until_converged=True`` runs until the chain after its burn-in (`BURN_IN_TAUS`
   autocorrelation times) is `CONVERGED_TAUS` autocorrelation times long on every parameter, with
   the estimates steady, checked every ``check_every`` steps; ``n_steps`` then caps the length.
-  ``time_limit_s`` stops any run when its time is up. `ChainRun.stopped` says why a run ended.
+  ``time_limit_s`` stops any run when its time is up (the global search at half of it).
+  `ChainRun.stopped` says why a run ended.
 """
 
 from __future__ import annotations
