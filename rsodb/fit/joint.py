@@ -42,9 +42,9 @@ from rsodb.fit.curves import pass_curves
 from rsodb.fit.likelihood import jitter_of
 from rsodb.fit.parameters import Parameter, ParameterSpace
 from rsodb.fit.priors import Uniform
-from rsodb.fit.result import assess_convergence, best_and_draws
+from rsodb.fit.result import best_and_draws, chain_verdict, first_kept_step
 from rsodb.fit.runner import FitProblem, load_periods, shape_store_for, spin_period_bounds
-from rsodb.fit.sampler import run_sampler
+from rsodb.fit.sampler import autocorr_time, run_sampler
 
 __all__ = [
     "JointPosterior",
@@ -62,7 +62,6 @@ TREND = "spin_period_rate_s_per_day"
 PERIOD = "spin_period_s"
 JOINT_ATTITUDES = ("inertial", "precessing")
 _SAME_EPOCH_DAYS = 1.0 / 86400.0  # passes closer than a second share the period exactly
-_SUMMARY_DRAWS = 400
 
 
 @dataclass(frozen=True, eq=False)
@@ -90,13 +89,17 @@ class JointPosterior:
     def values(self, theta: np.ndarray) -> dict[str, float]:
         return self.space.values(theta)
 
+    def period_of(self, values: Mapping, k: int):
+        """Pass `k`'s spin period from joint values (numbers, or arrays of samples)."""
+        return values[PERIOD] + values.get(TREND, 0.0) * self.days[k]
+
     def pass_values(self, values: Mapping[str, float], k: int) -> dict[str, float]:
         """The values of pass `k` (0-based) from joint values."""
         part = self.parts[k].space
         result = dict(part.fixed)
         for name in part.names:
             if name == PERIOD:
-                result[name] = values[PERIOD] + values.get(TREND, 0.0) * self.days[k]
+                result[name] = self.period_of(values, k)
             elif name in PER_PASS:
                 result[name] = values[f"{name}@{k + 1}"]
             else:
@@ -340,14 +343,17 @@ def summarise(problem: JointProblem, run, config) -> JointResult:
     """The `JointResult` of a sampler run of `problem`."""
     posterior = problem.posterior
     space = posterior.space
-    best, draws = best_and_draws(run, space, config.discard, _SUMMARY_DRAWS, config.sampler.seed)
-    unrolled = space.wrap_samples(draws)
-    quantiles = np.percentile(unrolled, [16, 50, 84], axis=0)
+    # As a single fit's summary (`FitResult.from_run`): every kept sample, angles unrolled.
+    discard = first_kept_step(run, config.discard)
+    kept = run.chain[discard:]
+    flat = space.wrap_samples(kept.reshape(-1, space.ndim))
+    quantiles = np.percentile(flat, [16, 50, 84], axis=0)
+    columns = dict(space.fixed) | dict(zip(space.names, flat.T))
+    best, _ = best_and_draws(run, space, discard, 0, config.sampler.seed)
     best_values = space.values(best)
     passes, curves = [], []
     for k, part_problem in enumerate(problem.problems):
-        rows = [posterior.pass_values(space.values(theta), k) for theta in draws]
-        periods = np.array([row.get(PERIOD, math.nan) for row in rows])
+        periods = np.broadcast_to(posterior.period_of(columns, k), flat.shape[:1])  # a fixed period: one value
         pass_curve, model_curve = pass_curves(
             part_problem.posterior,
             part_problem.observed,
@@ -359,7 +365,7 @@ def summarise(problem: JointProblem, run, config) -> JointResult:
         )
         window = pass_curve.in_window
         residual = pass_curve.mag_obs[window] - pass_curve.mag_model[window]
-        p16, p50, p84 = np.percentile(periods, [16, 50, 84]) if periods.size else (math.nan,) * 3
+        p16, p50, p84 = np.percentile(periods, [16, 50, 84])
         passes.append(
             {
                 "pass_id": part_problem.pass_id,
@@ -373,8 +379,7 @@ def summarise(problem: JointProblem, run, config) -> JointResult:
             }
         )
         curves.append((pass_curve, model_curve))
-    discard = config.discard if config.discard is not None else (run.burn_in or run.n_steps // 2)
-    converged, verdict = assess_convergence(run.n_steps - discard, run.autocorr_time, run.acceptance_fraction)
+    converged, verdict = chain_verdict(run, kept.shape[0], autocorr_time(kept))
     names = space.names
     return JointResult(
         pass_ids=problem.pass_ids,

@@ -54,7 +54,15 @@ from rsodb.fit.parameters import ParameterSpace, describe
 from rsodb.fit.sampler import autocorr_time
 from rsodb.storage import attr_text, to_json
 
-__all__ = ["FitResult", "SCHEMA_VERSION", "MAX_STORED_SAMPLES", "assess_convergence", "best_and_draws"]
+__all__ = [
+    "FitResult",
+    "SCHEMA_VERSION",
+    "MAX_STORED_SAMPLES",
+    "assess_convergence",
+    "best_and_draws",
+    "chain_verdict",
+    "first_kept_step",
+]
 
 SCHEMA_VERSION = 2
 READABLE_SCHEMAS = (1, 2)
@@ -70,13 +78,27 @@ ACCEPTANCE_RANGE = (0.15, 0.7)
 MISFIT_REDUCED_CHI2 = 2.0
 
 
+def first_kept_step(run, discard: int | None = None) -> int:
+    """The first step of a chain run that its summaries keep: `discard` when given, else the
+    burn-in its convergence check settled on, else half the chain."""
+    if discard is not None:
+        return int(discard)
+    return run.burn_in if run.burn_in is not None else run.n_steps // 2
+
+
+def chain_verdict(run, n_kept: int, tau: np.ndarray) -> tuple[bool, str]:
+    """(converged, verdict) of a run from its kept steps and their autocorrelation times (`assess_convergence`),
+    with why the run stopped."""
+    converged, verdict = assess_convergence(n_kept, tau, run.acceptance_fraction)
+    return converged, f"{verdict} ({run.stopped})" if run.stopped else verdict
+
+
 def best_and_draws(run, space, discard: int | None, count: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """(highest-posterior point (ndim,), `count` random draws (count, ndim)) of a chain run.
 
-    Draws come from the kept part (after `discard`, default half), wrapped angles reduced.
+    Draws come from the kept part (after `discard`, default `first_kept_step`), wrapped angles reduced.
     """
-    if discard is None:
-        discard = run.burn_in if run.burn_in is not None else run.n_steps // 2
+    discard = first_kept_step(run, discard)
     best_index = np.unravel_index(np.argmax(run.log_prob), run.log_prob.shape)
     flat = run.chain[discard:].reshape(-1, space.ndim)
     rng = np.random.default_rng(seed)
@@ -416,9 +438,7 @@ class FitResult:
         """
         space = posterior.space
         n_steps = run.n_steps
-        if discard is None:
-            discard = run.burn_in if run.burn_in is not None else n_steps // 2
-        discard = int(discard)
+        discard = first_kept_step(run, discard)
         if not 0 <= discard < n_steps:
             raise ValueError(f"discard={discard} must be within 0..{n_steps - 1} (the chain has {n_steps} steps)")
         kept = run.chain[discard:]
@@ -450,9 +470,7 @@ class FitResult:
         chi2 = float(np.sum((residuals / errors) ** 2))
         dof = int(residuals.size - space.ndim - likelihood.n_free_nuisance)
 
-        converged, verdict = assess_convergence(kept.shape[0], tau, run.acceptance_fraction)
-        if run.stopped:
-            verdict = f"{verdict} ({run.stopped})"
+        converged, verdict = chain_verdict(run, kept.shape[0], tau)
         flags = []
         if likelihood.kind == "gaussian" and dof > 0 and chi2 / dof > MISFIT_REDUCED_CHI2:
             median_err = float(np.median(errors))
