@@ -50,6 +50,7 @@ __all__ = [
     "NODE_SPACING_S",
     "choose_n_sub",
     "orbit_of",
+    "orbit_problem",
     "track_of",
     "columns_offset_deg",
     "COLUMNS_AGREE_DEG",
@@ -356,7 +357,7 @@ class PassGeometry:
         )
 
 
-def orbit_of(observed, track=None) -> Satellite | ObservedTrack:
+def orbit_of(observed) -> Satellite | ObservedTrack:
     """The orbit a pass's geometry comes from: its TLE or OMM, else its own Az/El/range columns.
 
     Parameters
@@ -364,8 +365,6 @@ def orbit_of(observed, track=None) -> Satellite | ObservedTrack:
     observed : ingest.observation.Pass or rsodb.archive.StoredPass
         Any object with ``tle`` or ``omm``, or with ``time_utc``, ``az_deg``, ``el_deg``,
         ``range_km``, ``site`` and ``norad`` (`track_of`).
-    track : ObservedTrack, optional
-        A track already fitted to this pass (returned as it is when the pass has no elements).
 
     Raises
     ------
@@ -376,8 +375,6 @@ def orbit_of(observed, track=None) -> Satellite | ObservedTrack:
         return Satellite.from_tle(observed.tle)
     if getattr(observed, "omm", None):
         return Satellite.from_omm(observed.omm)
-    if track is not None:
-        return track
     if getattr(observed, "az_deg", None) is None:
         name = getattr(observed, "pass_id", None) or getattr(observed, "source_name", observed)
         raise ValueError(
@@ -388,12 +385,27 @@ def orbit_of(observed, track=None) -> Satellite | ObservedTrack:
     return track_of(observed)
 
 
-def track_of(observed, refracted: bool = True) -> ObservedTrack:
+def orbit_problem(observed) -> str:
+    """Why a pass has no orbit (`orbit_of` fails), or "" when it has one."""
+    try:
+        orbit_of(observed)
+    except ValueError as error:
+        return str(error)
+    return ""
+
+
+def _line_of_sight(az_deg: np.ndarray, el_deg: np.ndarray) -> np.ndarray:
+    """(3, n) east, north, up unit vectors toward azimuths (from north through east) and elevations."""
+    a, e = np.radians(az_deg), np.radians(el_deg)
+    return np.array([np.cos(e) * np.sin(a), np.cos(e) * np.cos(a), np.sin(e)])
+
+
+def track_of(observed) -> ObservedTrack:
     """The track (`raycast.geometry.track.ObservedTrack`) of a pass's own Az/El/range columns.
 
-    Rows with a non-finite column are skipped; the elevation loses PyEphem's refraction when
-    `refracted` (the lab's writers include it); the columns are taken for the site they were
-    computed for (`track_site`) and rotated into GCRS at each row's time.
+    Rows with a non-finite column are skipped; the elevation loses PyEphem's refraction (the
+    lab's writers include it); the columns are taken for the site they were computed for
+    (`track_site`) and rotated into GCRS at each row's time.
 
     Raises
     ------
@@ -408,10 +420,7 @@ def track_of(observed, refracted: bool = True) -> ObservedTrack:
     times, az, el, rg = times[order], az[order], el[order], rg[order]
     site = track_site(observed)
     if times.size:
-        if refracted:
-            el = true_elevation_deg(el)
-        a, e = np.radians(az), np.radians(el)
-        enu = np.array([np.cos(e) * np.sin(a), np.cos(e) * np.cos(a), np.sin(e)]) * rg
+        enu = _line_of_sight(az, true_elevation_deg(el)) * rg
         gcrs = _EarthFrames.at(times).itrs_to_gcrs(site.itrs_km[:, None] + site.enu_itrs @ enu)
     else:
         gcrs = np.zeros((3, 0))
@@ -447,13 +456,8 @@ def columns_offset_deg(observed) -> tuple[float, float] | None:
     if not usable.any():
         return None
     geometry = PassGeometry.compute(orbit_of(observed), track_site(observed), observed.time_utc[usable], 0.0, n_sub=1)
-
-    def unit(az_deg, el_deg):
-        a, e = np.radians(az_deg), np.radians(el_deg)
-        return np.stack([np.cos(e) * np.sin(a), np.cos(e) * np.cos(a), np.sin(e)], axis=-1)
-
-    columns = unit(az[usable], true_elevation_deg(el[usable]))
-    cosine = np.clip(np.sum(columns * unit(geometry.az_deg, geometry.el_deg), axis=-1), -1.0, 1.0)
+    columns = _line_of_sight(az[usable], true_elevation_deg(el[usable]))
+    cosine = np.clip(np.sum(columns * _line_of_sight(geometry.az_deg, geometry.el_deg), axis=0), -1.0, 1.0)
     angle = np.degrees(np.arccos(cosine))
     return float(np.median(angle)), float(angle.max())
 

@@ -19,7 +19,7 @@ observed span only:
 
 The columns are written to 0.001 deg and 1 m, i.e. ~50 m at 3000 km; the fit averages that
 down. On the TOPEX file of 2024-07-30, which also carries its TLE, the track lies a median
-69 m from SGP4's positions over the 464 s pass and its lines of sight agree with SGP4's to
+68 m from SGP4's positions over the 464 s pass and its lines of sight agree with SGP4's to
 arc-seconds (tests/test_track.py; docs/geometry.md).
 
 A track is good where it was observed: `gcrs_state_km` refuses times more than

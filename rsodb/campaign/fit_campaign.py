@@ -22,7 +22,7 @@ import time
 
 from tqdm.auto import tqdm
 
-from raycast.geometry.pass_geometry import orbit_of
+from raycast.geometry.pass_geometry import orbit_problem
 from rsodb.archive import Archive
 from rsodb.fit.config import FitConfig
 from rsodb.fit.runner import fit_pass
@@ -31,7 +31,7 @@ from rsodb.pool import default_processes
 __all__ = ["CampaignOutcome", "run_campaign", "run_campaigns", "select_passes", "NO_ORBIT"]
 
 # Why a pass without an orbit is not fitted (CampaignOutcome.failed, the reports' index): it has
-# no orbital elements and no Az/El/range columns to fit a track to (`raycast.geometry.orbit_of`).
+# no orbital elements and no Az/El/range columns to fit a track to (`raycast.geometry.pass_geometry.orbit_problem`).
 NO_ORBIT = (
     "no orbital elements and no Az/El/range columns, so no pass geometry to fit: add elements with "
     "'rsodb elements add TLE_FILE' (or ingest the file with --tle TLE_FILE)"
@@ -40,13 +40,7 @@ NO_ORBIT = (
 
 def _has_orbit(archive: Archive, pass_id: str) -> bool:
     """Whether a stored pass has a geometry: elements, or a track of its Az/El/range columns."""
-    if archive.summary(pass_id).elements:
-        return True
-    try:
-        orbit_of(archive.get(pass_id))
-    except ValueError:
-        return False
-    return True
+    return bool(archive.summary(pass_id).elements) or not orbit_problem(archive.get(pass_id))
 
 
 @dataclass(frozen=True)

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from raycast.geometry.pass_geometry import orbit_of
+from raycast.geometry.pass_geometry import orbit_problem
 from rsodb.campaign.fit_campaign import run_campaigns
 from rsodb.fit.config import PERIODS_PRIOR, FitConfig, read_toml
 from rsodb.fit.model import ATTITUDES
@@ -509,15 +509,9 @@ def run_ladder(
         raise ValueError("the ladder has no rungs; give [ladder] rungs (or [objects.NORAD] rungs) in its configuration")
     failures: dict[str, dict[str, str]] = {o.pass_id: {} for o in observed}
     groups = []
-    orbits: dict[str, str] = {}
+    # The geometry needs an orbit: the pass's elements, or a track fitted to its columns.
+    orbits = {o.pass_id: orbit_problem(o) for o in observed}
     for o, config in planned:
-        if o.pass_id not in orbits:
-            # The geometry needs an orbit: the pass's elements, or a track fitted to its columns.
-            try:
-                orbit_of(o)
-                orbits[o.pass_id] = ""
-            except ValueError as error:
-                orbits[o.pass_id] = str(error)
         if orbits[o.pass_id]:
             failures[o.pass_id][config.name] = orbits[o.pass_id]
         else:
