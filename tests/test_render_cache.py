@@ -210,3 +210,38 @@ def test_edge_ray_points_cover_the_element_evenly(per_side):
 def test_edge_rays_per_side_is_checked():
     with pytest.raises(ValueError, match="edge_rays_per_side=0 must be an integer in"):
         SceneCache.build(topex.build(), grid_size=8, edge_rays_per_side=0)
+
+
+def test_build_keeps_its_working_tables_in_pieces():
+    # The build holds the rays' findings in the blocks they came in (raycast.renderer.cache._Rows)
+    # and cuts shading pieces a block of triangles at a time (_pieces); both must give exactly
+    # what one array and one cut of every triangle give.
+    from raycast.renderer.cache import _bisect, _pieces, _Rows
+
+    rng = np.random.default_rng(3)
+    blocks = [rng.integers(0, 256, size=(n, 5), dtype=np.uint8) for n in (4, 0, 7, 1)]
+    rows = _Rows(5)
+    for block in blocks:
+        rows.append(block)
+    whole = np.concatenate(blocks)
+    index = rng.integers(0, len(whole), size=30)
+    assert len(rows) == 12 and np.array_equal(rows[index], whole[index])
+
+    corners = rng.normal(size=(9, 3, 3))
+    normals = unit(rng.normal(size=(27, 3))).reshape(9, 3, 3) + [0.0, 0.0, 2.0]
+
+    def too_big(c, n, owner):
+        return np.linalg.norm(c[:, 1] - c[:, 0], axis=1) > 0.4 + 0.01 * owner
+
+    normal, area, parent = _pieces(corners, normals, too_big, chunk=2)
+    c, n, p = _bisect(corners, normals, np.arange(9), too_big)
+    order, expected_order = (
+        np.lexsort((area, parent)),
+        np.lexsort((0.5 * np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1), p)),
+    )
+    assert len(area) == len(c) > 9
+    assert np.array_equal(parent[order], p[expected_order])
+    mean = n.mean(axis=1)
+    assert np.allclose(normal[order], (mean / np.linalg.norm(mean, axis=1, keepdims=True))[expected_order])
+    triangle_area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    assert np.allclose(np.bincount(parent, weights=area), triangle_area)

@@ -77,6 +77,8 @@ _SHADING_ROWS = 1 << 16
 # An element is cut in four where its quarters see differently in more than this fraction of
 # its upper-hemisphere directions (see _split_where_partly_visible).
 _SPLIT_FRACTION = 0.05
+# Directions (rows of a group's factor matrix) taken at a time where a factorisation is tried.
+_DIRECTION_ROWS = 512
 
 
 def cube_grid_directions(grid_size):
@@ -171,6 +173,23 @@ def _bisect(corners, normals, owner, too_big):
     else:
         done.append((corners, normals, owner))
     return tuple(np.concatenate([d[i] for d in done]) for i in range(3))
+
+
+def _pieces(corners, normals, too_big, chunk=4096):
+    """Shading pieces of triangles (:func:`_bisect` of ``chunk`` triangles at a time, so the
+    pieces' corners are never all held): each piece's unit mean shading normal (p, 3), its
+    area (p,) and the index of its triangle (p,)."""
+    parts = []
+    for begin in range(0, len(corners), chunk):
+        end = min(begin + chunk, len(corners))
+        c, n, parent = _bisect(corners[begin:end], normals[begin:end], np.arange(begin, end), too_big)
+        mean = n.mean(axis=1)
+        mean /= np.linalg.norm(mean, axis=1, keepdims=True)
+        area = 0.5 * np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1)
+        parts.append((mean, area, parent))
+    if not parts:
+        return np.zeros((0, 3)), np.zeros(0), np.zeros(0, dtype=np.int64)
+    return tuple(np.concatenate([part[i] for part in parts]) for i in range(3))
 
 
 def _longest_edge_m(corners):
@@ -617,46 +636,40 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quant
     el_tri, el_side = np.concatenate(el_tri), np.concatenate(el_side)
     el_exposed = exposed[el_tri, el_side]
     visibility = np.zeros((0, -(-len(directions) // 8)), dtype=np.uint8)
+    row_of, seen, blocked = np.zeros(0, np.int64), np.zeros(0, bool), np.zeros(0, bool)
     n_rays = 0
     # Two grid spacings: every node a grazing direction interpolates from.
     band = math.sin(2.0 * _grid_spacing_rad(directions))
     if not el_exposed.all():
-        el_corners, el_normals, el_tri, el_side, el_exposed, visibility, n_rays = _split_where_partly_visible(
+        el_corners, el_normals, el_tri, el_side, el_exposed, found, n_rays = _split_where_partly_visible(
             mesh, el_corners, el_normals, el_tri, el_side, el_exposed, n_geo, directions, band, progress
         )
+        visibility, row_of, seen, blocked = found
+        del found  # so that `del visibility` below frees it
     parent_geo = _side_normals(n_geo, el_tri, el_side)
     # Pieces: cut from the elements until the shading normal turns by at most the material's step.
-    piece_corners, piece_normals, piece_parent = _bisect(
-        el_corners, el_normals, np.arange(len(el_tri)), lambda c, n, p: _normal_spread_rad(n) > step[el_tri[p]]
+    normals, area, piece_parent = _pieces(
+        el_corners, el_normals, lambda c, n, p: _normal_spread_rad(n) > step[el_tri[p]]
     )
+    del el_normals
     tri, geo = el_tri[piece_parent], parent_geo[piece_parent]
-    normals = piece_normals.mean(axis=1)
-    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     normals[np.einsum("ij,ij->i", normals, geo) < 0.0] *= -1.0
     is_exposed = el_exposed[piece_parent]
     el = dict(
         normal=normals,
         geo=geo,
-        area=0.5
-        * np.linalg.norm(
-            np.cross(piece_corners[:, 1] - piece_corners[:, 0], piece_corners[:, 2] - piece_corners[:, 0]), axis=1
-        ),
+        area=area,
         material=mesh.material_index[tri],
         exposed=is_exposed,
         parent=np.where(is_exposed, -1, piece_parent),
     )
+    # Only el is read from here on: the build's peak memory comes later, with the tables.
+    del piece_parent, tri, geo, normals, area, is_exposed
     # Only the visibility elements of sides that are not exposed were cast; they come first, so
-    # an element's index is its visibility column.
+    # an element's index is its place in seen and blocked, and row_of[element] its row of
+    # visibility (kept only for the elements both seen and blocked somewhere).
     cast = np.flatnonzero(~el_exposed)
     if len(cast):
-        seen = np.zeros(len(cast), dtype=bool)
-        blocked = np.zeros(len(cast), dtype=bool)
-        for begin in range(0, len(cast), 512):  # in chunks: (directions, elements) arrays are large
-            sl = slice(begin, begin + 512)
-            upper = (directions @ parent_geo[cast[sl]].T) > 0.0
-            open_ = _unpacked(visibility[sl], len(directions)).astype(bool)
-            seen[sl] = (open_ & upper).any(axis=0)
-            blocked[sl] = (~open_ & upper).any(axis=0)
         of_element = el["parent"].copy()
         occludable = of_element >= 0
         # Never blocked: exposed after all. Never seen: dropped.
@@ -707,9 +720,10 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quant
     # Pieces of one group sharing a visibility element add their areas to one (group, element) pair.
     pairs, pair_of = np.unique(np.column_stack([group[occl], el["column"][occl]]), axis=0, return_inverse=True)
     pair_area = np.bincount(pair_of.reshape(-1), weights=weight_area[occl], minlength=len(pairs))
+    del el, class_key, key, pair_of, weight_area, exposed_mask, group, shade_class
     starts = np.flatnonzero(np.r_[True, np.diff(pairs[:, 0]) != 0]) if len(pairs) else np.zeros(0, int)
     factors, factor_starts, factorised = _visibility_factors(
-        visibility, len(directions), pairs[:, 1], pair_area, starts, factor_tolerance
+        visibility, len(directions), row_of[pairs[:, 1]], pair_area, starts, factor_tolerance
     )
 
     # Classes are numbered in material order (material leads their key): one block each.
@@ -741,11 +755,12 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quant
     # (_visibility leaves them set for the cosine gate): an element facing well away from the
     # Sun or the observer then has no bit set around it, and the run time passes over it.
     raw_bits = np.zeros((len(directions), -(-len(raw_columns) // 64)), dtype=np.uint64)
-    for begin in range(0, len(raw_columns), 8 * 64):  # whole words at a time
-        columns = raw_columns[begin : begin + 8 * 64]
-        above = directions @ raw_geo[begin : begin + 8 * 64].T > -band
-        words = _cache_kernels.pack_words(_unpacked(visibility[columns], len(directions)).astype(bool) & above)
+    for begin in range(0, len(raw_columns), 2 * 64):  # whole words at a time
+        columns = raw_columns[begin : begin + 2 * 64]
+        above = directions @ raw_geo[begin : begin + 2 * 64].T > -band
+        words = _cache_kernels.pack_words(_unpacked(visibility[row_of[columns]], len(directions)).astype(bool) & above)
         raw_bits[:, begin // 64 : begin // 64 + words.shape[1]] = words
+    del visibility  # the element-major copy: the bits and factors hold what the run time needs
     raw_corners = el_corners[raw_columns].astype(np.float32) if len(raw_columns) else np.zeros((0, 3, 3), np.float32)
     gap_ptr, gap_word, gap_mask, gap_rays = _horizon_gaps(mesh, raw_corners, raw_geo, raw_bits, directions, band)
     return _Pose(
@@ -891,23 +906,25 @@ def _split_where_partly_visible(mesh, corners, normals, tri, side, exposed, n_ge
     rays.
 
     Returns the elements' corners, normals, tri, side and exposed flags after splitting (the
-    non-exposed ones first), the visibility bits of the non-exposed ones (element-major, see
-    :func:`_visibility`) and the rays cast.
+    non-exposed ones first), what their rays found, and the rays cast. What they found is
+    (visibility, row_of, seen, blocked): for each non-exposed element whether some direction
+    above its plane is open (seen) and whether some is blocked, and the visibility bits
+    (element-major, see :func:`_visibility`) of those both seen and blocked only, element
+    ``i``'s at row ``row_of[i]`` (-1 for the others).
     """
     cast = np.flatnonzero(~exposed)
     geo = _side_normals(n_geo, tri, side)
     raycaster, offset = open3d_scene(mesh), _ray_offset_m(mesh)
-    quarter_corners, quarter_normals = _quarters(corners[cast], normals[cast])
     coarse = cube_grid_directions(max(4, _grid_size_of(directions) // 4))
-    quarter_points = quarter_corners.mean(axis=2)
     split = np.zeros(len(cast), dtype=bool)
     n_rays = 0
     chunk = max(1, _MAX_BUILD_RAYS // (4 * len(coarse)))
     for begin in range(0, len(cast), chunk):
         sl = slice(begin, begin + chunk)
         element_geo = geo[cast[sl]]
+        quarter_points = _quarters(corners[cast[sl]], normals[cast[sl]])[0].mean(axis=2)
         bits, rays = _visibility(
-            raycaster, offset, quarter_points[sl].reshape(-1, 3), np.repeat(element_geo, 4, axis=0), coarse, band
+            raycaster, offset, quarter_points.reshape(-1, 3), np.repeat(element_geo, 4, axis=0), coarse, band
         )
         n_rays += rays
         vis = _unpacked(bits, len(coarse)).reshape(len(coarse), -1, 4)
@@ -915,28 +932,67 @@ def _split_where_partly_visible(mesh, corners, normals, tri, side, exposed, n_ge
         differ = (vis.min(axis=2) != vis.max(axis=2)) & upper
         split[sl] = differ.sum(axis=0) > _SPLIT_FRACTION * np.maximum(upper.sum(axis=0), 1)
     whole = cast[~split]
-    new_corners = np.concatenate([corners[whole], quarter_corners[split].reshape(-1, 3, 3), corners[exposed]])
-    new_normals = np.concatenate([normals[whole], quarter_normals[split].reshape(-1, 3, 3), normals[exposed]])
+    quarter_corners, quarter_normals = _quarters(corners[cast[split]], normals[cast[split]])
+    new_corners = np.concatenate([corners[whole], quarter_corners.reshape(-1, 3, 3), corners[exposed]])
+    new_normals = np.concatenate([normals[whole], quarter_normals.reshape(-1, 3, 3), normals[exposed]])
     new_tri = np.concatenate([tri[whole], np.repeat(tri[cast[split]], 4), tri[exposed]])
     new_side = np.concatenate([side[whole], np.repeat(side[cast[split]], 4), side[exposed]])
     n_cast = len(whole) + 4 * int(split.sum())
+    del quarter_corners, quarter_normals
     new_exposed = np.r_[np.zeros(n_cast, dtype=bool), np.ones(int(exposed.sum()), dtype=bool)]
     points = new_corners[:n_cast].mean(axis=1)
     new_geo = _side_normals(n_geo, new_tri[:n_cast], new_side[:n_cast])
-    visibility = np.empty((n_cast, -(-len(directions) // 8)), dtype=np.uint8)
+    # Most elements are never blocked (exposed after all) or never seen: only the bits of the
+    # others are kept, so the build holds about as much as the tables it makes.
+    seen, blocked = np.zeros(n_cast, dtype=bool), np.zeros(n_cast, dtype=bool)
+    visibility = _Rows(-(-len(directions) // 8))
     bar = None
     if progress:
         bar = tqdm(total=n_cast, unit="element", desc="visibility")
-    chunk = max(1, 16 * _MAX_BUILD_RAYS // len(directions))
+    chunk = max(1, 4 * _MAX_BUILD_RAYS // len(directions))
     for begin in range(0, n_cast, chunk):
         sl = slice(begin, begin + chunk)
-        visibility[sl], rays = _visibility(raycaster, offset, points[sl], new_geo[sl], directions, band)
+        bits, rays = _visibility(raycaster, offset, points[sl], new_geo[sl], directions, band)
         n_rays += rays
+        end = min(begin + chunk, n_cast)
+        for first in range(begin, end, 64):  # (directions, elements) arrays are large
+            few = slice(first, min(first + 64, end))
+            upper = (directions @ new_geo[few].T) > 0.0
+            open_ = _unpacked(bits[few.start - begin : few.stop - begin], len(directions)).astype(bool)
+            seen[few], blocked[few] = (open_ & upper).any(axis=0), (~open_ & upper).any(axis=0)
+        visibility.append(bits[seen[sl] & blocked[sl]])
         if bar is not None:
             bar.update(len(points[sl]))
     if bar is not None:
         bar.close()
-    return new_corners, new_normals, new_tri, new_side, new_exposed, visibility, n_rays
+    row_of = np.full(n_cast, -1, dtype=np.int64)
+    row_of[seen & blocked] = np.arange(len(visibility))
+    cast_visibility = (visibility, row_of, seen, blocked)
+    return new_corners, new_normals, new_tri, new_side, new_exposed, cast_visibility, n_rays
+
+
+class _Rows:
+    """Rows of a uint8 table kept as the blocks they were made in (never copied into one array);
+    ``rows[index]`` gathers (len(index), width) like an array's fancy indexing."""
+
+    def __init__(self, width):
+        self.width, self.blocks, self.ends = width, [], [0]
+
+    def append(self, block):
+        self.blocks.append(block)
+        self.ends.append(self.ends[-1] + len(block))
+
+    def __len__(self):
+        return self.ends[-1]
+
+    def __getitem__(self, index):
+        index = np.asarray(index, dtype=np.int64)
+        out = np.empty((len(index), self.width), dtype=np.uint8)
+        block = np.searchsorted(self.ends, index, side="right") - 1
+        for b in np.unique(block):
+            here = block == b
+            out[here] = self.blocks[b][index[here] - self.ends[b]]
+        return out
 
 
 def _side_normals(n_geo, tri, side):
@@ -958,7 +1014,7 @@ class _GroupMatrix:
     """A group's ``M^T = diag(sqrt(A)) V^T`` (e, d), read from the element-major visibility bits
     a block of rows at a time, so no e x d float array is ever held."""
 
-    _ROWS = 256
+    _ROWS = 64
 
     def __init__(self, visibility, columns, weights, n_directions):
         self.visibility, self.columns, self.n_directions = visibility, columns, n_directions
@@ -1003,24 +1059,36 @@ def _group_basis(matrix, n_elements, budget, rng):
     rank = min(16, max(1, n_elements // 16))
     while rank < n_elements / _FACTOR_ELEMENTS_PER_COLUMN:
         width = min(rank + 8, n_elements)
-        sketch = matrix.times(rng.standard_normal((matrix.n_directions, width)).astype(np.float32))
+        sketch = matrix.times(rng.standard_normal((matrix.n_directions, width), dtype=np.float32))
         for _ in range(2):
             sketch = matrix.times(matrix.transposed_times(np.linalg.qr(sketch)[0]))
         basis = np.linalg.qr(sketch.astype(np.float64))[0]
-        projected = matrix.transposed_times(basis.astype(np.float32)).astype(np.float64)  # (d, k) = M Q
+        projected = matrix.transposed_times(basis.astype(np.float32))  # (d, k) = M Q
         # M's singular directions within the sketch: eigenvectors of the k x k Gram matrix.
-        rotation = np.linalg.eigh(projected.T @ projected)[1][:, ::-1]
+        gram = sum(block.T @ block for block in _row_blocks(projected))
+        rotation = np.linalg.eigh(gram)[1][:, ::-1]
         basis = basis @ rotation
-        projected = projected @ rotation
-        # worst[r - 1] = max over directions of |R(s)|^2 when the first r columns are kept.
-        np.square(projected, out=projected)
-        np.cumsum(projected, axis=1, out=projected)
-        np.subtract(row_norm2[:, None], projected, out=projected)
-        good = np.flatnonzero(projected.max(axis=0) <= budget)
+        # worst[r - 1] = max over directions of |R(s)|^2 when the first r columns are kept; a
+        # block of directions at a time, so only M Q itself is held whole (in 32 bits).
+        worst = np.full(projected.shape[1], -np.inf)
+        for first, block in zip(range(0, len(projected), _DIRECTION_ROWS), _row_blocks(projected)):
+            rotated = block @ rotation
+            np.square(rotated, out=rotated)
+            np.cumsum(rotated, axis=1, out=rotated)
+            np.subtract(row_norm2[first : first + len(block), None], rotated, out=rotated)
+            np.maximum(worst, rotated.max(axis=0), out=worst)
+        del projected
+        good = np.flatnonzero(worst <= budget)
         if len(good) and good[0] + 1 < n_elements / _FACTOR_ELEMENTS_PER_COLUMN:
             return basis[:, : int(good[0]) + 1]
         rank *= 2
     return None
+
+
+def _row_blocks(array):
+    """``array`` (n, k) in 64-bit blocks of ``_DIRECTION_ROWS`` rows."""
+    for first in range(0, len(array), _DIRECTION_ROWS):
+        yield array[first : first + _DIRECTION_ROWS].astype(np.float64)
 
 
 def _visibility_factors(visibility, n_directions, columns_of_pairs, area, starts, tolerance, seed=0):
