@@ -388,6 +388,32 @@ def test_stale_temp_files_are_removed_unless_their_writer_is_alive(real_archive)
     assert len(reopened.passes()) == 5  # temp files are never read as passes
 
 
+def test_a_result_commit_removes_a_writer_s_file_listed_at_open_without_listing_again(real_archive, monkeypatch):
+    """A writer alive when the archive was opened leaves its file; once it is gone, the next commit
+    of that object removes it, from the names listed at open (a directory of 20 000 objects is
+    not listed again for each commit)."""
+    import rsodb.archive.commits
+
+    live = real_archive.objects_dir / ".22076.h5.4343.cafebabe.tmp"
+    live.write_bytes(b"a file being written")
+    with ObjectLock(real_archive.objects_dir / layout.lock_file_name(22076)):
+        reopened = Archive(real_archive.path)
+    assert live.exists()  # its writer held the lock at open
+    late = real_archive.objects_dir / ".22076.h5.4444.feedface.tmp"  # a writer killed after the open
+    late.write_bytes(b"half an HDF5 file")
+
+    def no_listing(objects_dir):
+        raise AssertionError("the objects directory was listed again")
+
+    monkeypatch.setattr(rsodb.archive.commits, "list_temp_names", no_listing)
+    topex = "22076-20240730T212240-V-derenivka"
+    assert reopened.store_results([(topex, "periods", "default", Periods(9.48, [3.0]))]) == 1
+    assert not live.exists() and late.exists()  # the late one waits for the next open
+    monkeypatch.undo()
+    Archive(real_archive.path)
+    assert not late.exists()
+
+
 def test_a_commit_removes_what_a_killed_writer_of_its_object_left(tmp_path, shared_data):
     """Temporary files left after the archive was opened go when their object is next committed
     (listed once per ingest run, whatever its number of commit rounds)."""

@@ -28,7 +28,7 @@ from rsodb.archive.commits import ObjectTransaction, stage_files, stage_metadata
 from rsodb.archive.index import CatalogIndex, DamagedIndexError, ObjectState, PassQuery, StoredSources
 from rsodb.archive.ingest_report import CommitEvent, IngestReport, PendingFile
 from rsodb.archive.integrity import DamagedObjectError, check_result, open_object
-from rsodb.archive.locking import ObjectLock, remove_abandoned_staging, replacing, stale_temp_files
+from rsodb.archive.locking import ObjectLock, remove_abandoned_staging, replacing
 from rsodb.archive.stored import ArchivedObject, DamagedObject, PassSummary, ResultSummary, StoredPass
 from rsodb.storage import attr_text
 
@@ -76,8 +76,11 @@ class Archive:
         self.durable = durable
         self.lock_timeout_s = lock_timeout_s
         self._open_or_create(create)
+        # Temporary files of writers still running when the archive was opened: a commit removes
+        # those of its objects (ObjectTransaction.temp_names) without listing the directory again.
+        self._temp_names: set[str] = set()
         if os.access(self.objects_dir, os.W_OK):
-            self._remove_stale_temp_files()
+            self._temp_names = self._remove_stale_temp_files()
         self._index = CatalogIndex(self.path / layout.INDEX_NAME)
 
     def __repr__(self) -> str:
@@ -132,22 +135,36 @@ class Archive:
         """The lock an object's writers take (a context manager)."""
         return ObjectLock(self.objects_dir / layout.lock_file_name(norad), timeout_s=self.lock_timeout_s)
 
-    def _remove_stale_temp_files(self) -> None:
-        """Delete temporary files of killed writers; objects being written right now are skipped."""
+    def _remove_stale_temp_files(self) -> set[str]:
+        """Delete temporary files of killed writers; objects being written right now are skipped.
+        Returns the names of the temporary files left (those of the writers still running)."""
         staging = self.path / layout.STAGING_DIR
         if staging.is_dir():
             remove_abandoned_staging(staging)
-        norads = {int(match.group(1)) for match in map(_TEMP_NAME.match, os.listdir(self.objects_dir)) if match}
-        for norad in sorted(norads):
+        by_norad: dict[int, list[str]] = {}
+        for name in os.listdir(self.objects_dir):
+            match = _TEMP_NAME.match(name)
+            if match:
+                by_norad.setdefault(int(match.group(1)), []).append(name)
+        left = set()
+        for norad in sorted(by_norad):
             lock = self.object_lock(norad)
-            if lock.acquire(blocking=False):
-                try:
-                    for path in stale_temp_files(self.objects_dir, layout.object_file_name(norad)):
-                        path.unlink(missing_ok=True)
-                finally:
-                    lock.release()
+            if not lock.acquire(blocking=False):
+                left.update(by_norad[norad])
+                continue
+            try:
+                for name in by_norad[norad]:
+                    (self.objects_dir / name).unlink(missing_ok=True)
+            finally:
+                lock.release()
+        return left
 
     def _transaction(self, temp_names: set[str] | None = None) -> ObjectTransaction:
+        """One round of commits. Without `temp_names` it removes the temporary files listed when
+        the archive was opened (listing 20 000 objects' directory again would cost ~20 ms a call);
+        one that a writer killed since then left is removed by the next Archive() or ingest."""
+        if temp_names is None:
+            temp_names = self._temp_names
         return ObjectTransaction(
             self.objects_dir, self._index, self.durable, self.lock_timeout_s, temp_names=temp_names
         )
@@ -619,7 +636,7 @@ class Archive:
         """Commit the files of many objects in one round: each object is replaced atomically,
         and the round pays for one flush of the file system instead of one per object.
         `temp_names`: killed writers' temporary files, listed once for the rounds of one run
-        (`rsodb.archive.commits.list_temp_names`; default: listed in this round).
+        (`rsodb.archive.commits.list_temp_names`; default: those listed when the archive was opened).
 
         Returns
         -------
