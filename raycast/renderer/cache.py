@@ -59,7 +59,7 @@ from raycast.renderer.shading import disk_shading
 __all__ = ["SceneCache", "cube_grid_directions", "cube_grid_weights"]
 
 # Rays per batch of the build's visibility casting (bounds its buffers, ~20 MB with Open3D's copies).
-_MAX_BUILD_RAYS = 400_000
+_MAX_BUILD_RAYS = 100_000
 # Halvings per triangle at most: a piece is then 1/2**(_MAX_BISECTIONS/2) of the triangle's size.
 _MAX_BISECTIONS = 24
 # Groups of at most this many occludable elements keep their visibility columns as they are.
@@ -856,29 +856,29 @@ def _horizon_gaps(mesh, corners, normals, raw_bits, directions, band):
         bits = np.unpackbits(
             np.ascontiguousarray(raw_bits[:, begin // 64 : -(-end // 64)]).view(np.uint8), axis=1, bitorder="little"
         )[:, : end - begin].astype(bool)
-        node, element = np.nonzero((height > 0.0) & (height < band) & ~bits)
-        if len(node) == 0:
-            continue
-        element += begin
-        toward = around[node]  # (p, probes, 3)
-        pair, probe = np.nonzero(np.einsum("pkx,px->pk", toward, normals[element]) > 0.0)  # probes above the plane
-        rays = np.empty((len(pair), 6), dtype=np.float32)
-        rays[:, :3] = origins[element[pair]]
-        rays[:, 3:] = toward[pair, probe]
-        open_ = np.zeros(len(rays), dtype=bool)
-        for first in range(0, len(rays), _MAX_BUILD_RAYS):
-            batch = rays[first : first + _MAX_BUILD_RAYS]
-            open_[first : first + len(batch)] = ~raycaster.test_occlusions(batch).numpy()
-        n_rays += len(rays)
-        # An open probe is a gap only inside a cell whose four nodes are all blocked: where one of
-        # them is open, the pair is a mixed pair and rays decide it already.
-        seen = np.flatnonzero(open_)
-        corners_of = cube_grid_weights(rays[seen, 3:].astype(float), grid_size)[0]
-        shut = ~bits[corners_of, (element[pair[seen]] - begin)[:, None]].any(axis=1)
-        gap = np.zeros(len(node), dtype=bool)
-        gap[pair[seen[shut]]] = True
-        nodes.append(node[gap])
-        elements.append(element[gap])
+        in_band = np.nonzero((height > 0.0) & (height < band) & ~bits)
+        del height
+        # (node, element) pairs a batch of rays' worth at a time.
+        for first in range(0, len(in_band[0]), max(1, _MAX_BUILD_RAYS // around.shape[1])):
+            last = first + max(1, _MAX_BUILD_RAYS // around.shape[1])
+            node, element = in_band[0][first:last], in_band[1][first:last] + begin
+            toward = around[node]  # (p, probes, 3)
+            pair, probe = np.nonzero(np.einsum("pkx,px->pk", toward, normals[element]) > 0.0)  # probes above the plane
+            rays = np.empty((len(pair), 6), dtype=np.float32)
+            rays[:, :3] = origins[element[pair]]
+            rays[:, 3:] = toward[pair, probe]
+            del toward
+            open_ = ~raycaster.test_occlusions(rays).numpy()
+            n_rays += len(rays)
+            # An open probe is a gap only inside a cell whose four nodes are all blocked: where one of
+            # them is open, the pair is a mixed pair and rays decide it already.
+            seen = np.flatnonzero(open_)
+            corners_of = cube_grid_weights(rays[seen, 3:].astype(float), grid_size)[0]
+            shut = ~bits[corners_of, (element[pair[seen]] - begin)[:, None]].any(axis=1)
+            gap = np.zeros(len(node), dtype=bool)
+            gap[pair[seen[shut]]] = True
+            nodes.append(node[gap])
+            elements.append(element[gap])
     node = np.concatenate(nodes) if nodes else np.zeros(0, np.int64)
     element = np.concatenate(elements) if elements else np.zeros(0, np.int64)
     # One key per (node, word): the elements of a word that share a gap node share one mask.
