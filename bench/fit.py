@@ -139,7 +139,7 @@ def whole_pass(args, argv) -> int:
 {what}; {problem.selection.description}; {args.walkers} walkers x {result.n_steps} steps after a global
 search, {args.processes or os.cpu_count()} processes, load average {load[0]:.1f} at the end (shared machine).
 Wall time {fit_wall:.0f} s ({fit_wall / 60:.1f} min) against a target of {target / 60:.0f} min: {met}.
-Sampler: {result.verdict.rstrip('.')}. Residual RMS over every sample of the window {result.residual_rms_mag:.3f} mag.
+Sampler: {result.verdict.rstrip(".")}. Residual RMS over every sample of the window {result.residual_rms_mag:.3f} mag.
 """
     figures = [
         figure(f"{args.pass_name}, {mode}, end to end", f"{fit_wall / 60:.1f} min wall", f"<= {target / 60:.0f} min"),
