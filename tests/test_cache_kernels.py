@@ -157,3 +157,14 @@ def test_rays_and_open_fractions_follow_the_pairs_needs():
         np.testing.assert_array_equal(rays[row, 3:], d)
     occluded = np.array([True, False, False, False, False, True, True, True])
     np.testing.assert_allclose(_cache_kernels.open_fraction(need, occluded, 2), [0.5, 0.5, 0.0])
+
+
+def test_lowest_bit_is_the_index_of_the_lowest_set_bit():
+    from raycast.renderer._cache_kernels import _lowest_bit
+
+    rng = np.random.default_rng(11)
+    for position in range(64):
+        above = rng.integers(0, 2**63, dtype=np.uint64) << np.uint64(position)  # bits at and above it
+        word = (above | np.uint64(1 << position)) & ~np.uint64((1 << position) - 1)
+        assert _lowest_bit(np.uint64(1 << position)) == position
+        assert _lowest_bit(word) == position
