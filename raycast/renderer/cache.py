@@ -58,7 +58,7 @@ from raycast.renderer.shading import disk_shading
 
 __all__ = ["SceneCache", "cube_grid_directions", "cube_grid_weights"]
 
-# Rays per batch of the build's visibility casting (bounds its buffers, ~20 MB with Open3D's copies).
+# Rays per batch of the build's visibility casting (bounds its buffers, ~5 MB with Open3D's copies).
 _MAX_BUILD_RAYS = 100_000
 # Halvings per triangle at most: a piece is then 1/2**(_MAX_BISECTIONS/2) of the triangle's size.
 _MAX_BISECTIONS = 24
@@ -641,11 +641,11 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quant
     # Two grid spacings: every node a grazing direction interpolates from.
     band = math.sin(2.0 * _grid_spacing_rad(directions))
     if not el_exposed.all():
-        el_corners, el_normals, el_tri, el_side, el_exposed, found, n_rays = _split_where_partly_visible(
-            mesh, el_corners, el_normals, el_tri, el_side, el_exposed, n_geo, directions, band, progress
+        (el_corners, el_normals, el_tri, el_side, el_exposed, (visibility, row_of, seen, blocked), n_rays) = (
+            _split_where_partly_visible(
+                mesh, el_corners, el_normals, el_tri, el_side, el_exposed, n_geo, directions, band, progress
+            )
         )
-        visibility, row_of, seen, blocked = found
-        del found  # so that `del visibility` below frees it
     parent_geo = _side_normals(n_geo, el_tri, el_side)
     # Pieces: cut from the elements until the shading normal turns by at most the material's step.
     normals, area, piece_parent = _pieces(
@@ -849,6 +849,7 @@ def _horizon_gaps(mesh, corners, normals, raw_bits, directions, band):
     # Elements per batch, whole words, so that a batch casts about _MAX_BUILD_RAYS: a node is
     # within the band above an element's plane for a share band / 2 of the directions.
     per_element = max(1, int(len(directions) * band / 2.0) * around.shape[1])
+    pairs_per_batch = max(1, _MAX_BUILD_RAYS // around.shape[1])  # (node, element) pairs: probes each
     chunk = 64 * max(1, _MAX_BUILD_RAYS // (64 * per_element))
     for begin in range(0, n_elements, chunk):
         end = min(begin + chunk, n_elements)
@@ -859,9 +860,9 @@ def _horizon_gaps(mesh, corners, normals, raw_bits, directions, band):
         in_band = np.nonzero((height > 0.0) & (height < band) & ~bits)
         del height
         # (node, element) pairs a batch of rays' worth at a time.
-        for first in range(0, len(in_band[0]), max(1, _MAX_BUILD_RAYS // around.shape[1])):
-            last = first + max(1, _MAX_BUILD_RAYS // around.shape[1])
-            node, element = in_band[0][first:last], in_band[1][first:last] + begin
+        for first in range(0, len(in_band[0]), pairs_per_batch):
+            node = in_band[0][first : first + pairs_per_batch]
+            element = in_band[1][first : first + pairs_per_batch] + begin
             toward = around[node]  # (p, probes, 3)
             pair, probe = np.nonzero(np.einsum("pkx,px->pk", toward, normals[element]) > 0.0)  # probes above the plane
             rays = np.empty((len(pair), 6), dtype=np.float32)
@@ -967,8 +968,7 @@ def _split_where_partly_visible(mesh, corners, normals, tri, side, exposed, n_ge
         bar.close()
     row_of = np.full(n_cast, -1, dtype=np.int64)
     row_of[seen & blocked] = np.arange(len(visibility))
-    cast_visibility = (visibility, row_of, seen, blocked)
-    return new_corners, new_normals, new_tri, new_side, new_exposed, cast_visibility, n_rays
+    return new_corners, new_normals, new_tri, new_side, new_exposed, (visibility, row_of, seen, blocked), n_rays
 
 
 class _Rows:
@@ -1065,13 +1065,13 @@ def _group_basis(matrix, n_elements, budget, rng):
         basis = np.linalg.qr(sketch.astype(np.float64))[0]
         projected = matrix.transposed_times(basis.astype(np.float32))  # (d, k) = M Q
         # M's singular directions within the sketch: eigenvectors of the k x k Gram matrix.
-        gram = sum(block.T @ block for block in _row_blocks(projected))
+        gram = sum(block.T @ block for _, block in _row_blocks(projected))
         rotation = np.linalg.eigh(gram)[1][:, ::-1]
         basis = basis @ rotation
         # worst[r - 1] = max over directions of |R(s)|^2 when the first r columns are kept; a
         # block of directions at a time, so only M Q itself is held whole (in 32 bits).
         worst = np.full(projected.shape[1], -np.inf)
-        for first, block in zip(range(0, len(projected), _DIRECTION_ROWS), _row_blocks(projected)):
+        for first, block in _row_blocks(projected):
             rotated = block @ rotation
             np.square(rotated, out=rotated)
             np.cumsum(rotated, axis=1, out=rotated)
@@ -1086,9 +1086,9 @@ def _group_basis(matrix, n_elements, budget, rng):
 
 
 def _row_blocks(array):
-    """``array`` (n, k) in 64-bit blocks of ``_DIRECTION_ROWS`` rows."""
+    """(first row, block): ``array`` (n, k) in 64-bit blocks of ``_DIRECTION_ROWS`` rows."""
     for first in range(0, len(array), _DIRECTION_ROWS):
-        yield array[first : first + _DIRECTION_ROWS].astype(np.float64)
+        yield first, array[first : first + _DIRECTION_ROWS].astype(np.float64)
 
 
 def _visibility_factors(visibility, n_directions, columns_of_pairs, area, starts, tolerance, seed=0):
