@@ -44,11 +44,13 @@ Principled
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cache
 import math
 
 from numba import njit, vectorize
 import numpy as np
 
+from raycast.renderer import _shading_kernels
 from raycast.renderer.ggx_tables import (
     dielectric_fresnel,
     dielectric_fresnel_mean,
@@ -75,6 +77,9 @@ MASKING_MODES = ("height-correlated", "separable")
 DISTRIBUTIONS = ("GGX", "MULTI_GGX")
 
 fresnel_dielectric = dielectric_fresnel
+# The view cosines of the tables' nodes: a table read there gives the node's value.
+_E_NODES = np.linspace(0.0, 1.0, _shading_kernels.E_NODES)
+_S_NODES = np.linspace(0.0, 1.0, _shading_kernels.S_NODES)
 
 
 def _dot(a, b):
@@ -137,31 +142,19 @@ def valid_reflection_normal(n_geo, wo, n_shade):
 
 @njit(cache=True, nogil=True)
 def _bend_normals(n_geo, wo, n_shade, out):
-    """Write the valid-reflection normal into ``out`` where the shading normal needs bending."""
+    """Write the valid-reflection normal into ``out`` (:func:`raycast.renderer._shading_kernels.bent_normal`)."""
     for k in range(len(out)):
-        gx, gy, gz = n_geo[k, 0], n_geo[k, 1], n_geo[k, 2]
-        sx, sy, sz = n_shade[k, 0], n_shade[k, 1], n_shade[k, 2]
-        ox, oy, oz = wo[k, 0], wo[k, 1], wo[k, 2]
-        i_z = ox * gx + oy * gy + oz * gz
-        cos_sg = sx * gx + sy * gy + sz * gz
-        mirror_z = 2.0 * (sx * ox + sy * oy + sz * oz) * cos_sg - i_z
-        threshold = min(0.9 * i_z, 0.01)
-        if not mirror_z < threshold:
-            continue
-        x, y, z = sx - cos_sg * gx, sy - cos_sg * gy, sz - cos_sg * gz
-        length = math.sqrt(x * x + y * y + z * z)
-        if length > 0.0:
-            x, y, z = x / length, y / length, z / length
-        else:
-            x, y, z = sx, sy, sz
-        i_x = ox * x + oy * y + oz * z
-        a = i_x * i_x + i_z * i_z
-        b = 2.0 * (a + i_z * threshold)
-        c = (threshold + i_z) ** 2
-        root = math.sqrt(max(b * b - 4.0 * a * c, 0.0))
-        n_z2 = 0.25 * (b + root) / a if i_x < 0.0 else 0.25 * (b - root) / a
-        along, up = math.sqrt(max(1.0 - n_z2, 0.0)), math.sqrt(max(n_z2, 0.0))
-        out[k, 0], out[k, 1], out[k, 2] = along * x + up * gx, along * y + up * gy, along * z + up * gz
+        out[k, 0], out[k, 1], out[k, 2] = _shading_kernels.bent_normal(
+            n_geo[k, 0],
+            n_geo[k, 1],
+            n_geo[k, 2],
+            wo[k, 0],
+            wo[k, 1],
+            wo[k, 2],
+            n_shade[k, 0],
+            n_shade[k, 1],
+            n_shade[k, 2],
+        )
 
 
 class BRDF:
@@ -198,6 +191,12 @@ class BRDF:
         """
         raise NotImplementedError
 
+    def packed(self):
+        """This BRDF as the compiled shading reads it (:mod:`raycast.renderer._shading_kernels`),
+        a float64 array; None for a BRDF that only numpy evaluates (the renderers then call
+        :meth:`shade`)."""
+        return None
+
 
 def _specular_cosines(cos_i, cos_o, spec_cos_i, spec_cos_o):
     """The cosines a specular lobe is evaluated with, and where it may be non-zero.
@@ -230,6 +229,9 @@ class Lambertian(BRDF):
     def shade(self, cos_i, cos_o, cos_io, spec_cos_i=None, spec_cos_o=None):
         return self.albedo / np.pi * np.maximum(cos_i, 0.0)
 
+    def packed(self):
+        return _shading_kernels.as_packed((), (_shading_kernels.LAMBERTIAN, self.albedo))
+
 
 def _ggx_lobe(ci, co, cos_io, alpha, masking, valid=None):
     """D G / (4 cos i cos o) and cos(h, wi) for the valid pairs; zero elsewhere.
@@ -246,23 +248,7 @@ def _ggx_lobe(ci, co, cos_io, alpha, masking, valid=None):
 @vectorize(cache=True, nopython=True)
 def _ggx_lobe_value(ci, co, cos_io, valid, alpha, separable):
     """:func:`_ggx_lobe`'s value at one point (a ufunc: one pass, no temporaries)."""
-    if not valid:
-        return 0.0
-    h_len = math.sqrt(max(2.0 + 2.0 * cos_io, 0.0))
-    cos_nh = min(max((ci + co) / (h_len if h_len > 0.0 else 1.0), 0.0), 1.0)
-    alpha2 = alpha * alpha
-    lam_i = _lambda(ci, alpha2)
-    lam_o = _lambda(co, alpha2)
-    g = 1.0 / ((1.0 + lam_i) * (1.0 + lam_o)) if separable else 1.0 / (1.0 + lam_i + lam_o)
-    d = alpha2 / (math.pi * (1.0 + (alpha2 - 1.0) * cos_nh * cos_nh) ** 2)
-    return d * g / (4.0 * ci * co)
-
-
-@njit(cache=True, nogil=True)
-def _lambda(cos_n, alpha2):
-    """:func:`smith_lambda` of one cosine, ``alpha2`` = alpha**2."""
-    c2 = min(max(cos_n * cos_n, 1e-300), 1.0)
-    return 0.5 * (math.sqrt(1.0 + alpha2 * max(1.0 / c2 - 1.0, 0.0)) - 1.0)
+    return _shading_kernels.ggx_lobe(ci, co, cos_io, alpha, separable) if valid else 0.0
 
 
 @dataclass(frozen=True)
@@ -344,6 +330,15 @@ class GGX(BRDF):
         ci, co, valid = _specular_cosines(cos_i, cos_o, spec_cos_i, spec_cos_o)
         value, _ = _ggx_lobe(ci, co, cos_io, self.alpha, self.masking, valid)
         return self.color * value * np.maximum(ci, 0.0) * self._scattering(co)
+
+    @cache
+    def packed(self):
+        multi = self.distribution == "MULTI_GGX"
+        head = (_shading_kernels.GGX, self.color, self.alpha, self.masking == "separable", multi)
+        if not multi:
+            return _shading_kernels.as_packed((), head)
+        scattering = _MultipleScattering(self.roughness, self.color)
+        return _shading_kernels.as_packed((ggx_albedo(self.roughness, _E_NODES),), (*head, scattering.fms))
 
 
 @dataclass(frozen=True)
@@ -470,6 +465,29 @@ class Principled(BRDF):
                 self.roughness, self.base_color + (1.0 - self.base_color) / 21.0
             ).factor(co)
         return (1.0 - self.metallic) * dielectric + self.metallic * metal * specular_cosine
+
+    @cache
+    def packed(self):
+        multi = self.distribution == "MULTI_GGX"
+        f0_eta = _f0_from_ior(self.eta)
+        metal_fms = _MultipleScattering(self.roughness, self.base_color + (1.0 - self.base_color) / 21.0).fms
+        head = (
+            _shading_kernels.PRINCIPLED,
+            self.base_color,
+            self.alpha,
+            self.metallic,
+            multi,
+            self.f0,
+            self.eta,
+            f0_eta,
+            self._dielectric_scattering().fms if multi else 0.0,
+            metal_fms if multi else 0.0,
+        )
+        curves = (
+            ggx_albedo(self.roughness, _E_NODES) if multi else (),
+            dielectric_fresnel_mean(self.roughness, _S_NODES, self.eta) if self.eta != 1.0 else (),
+        )
+        return _shading_kernels.as_packed(curves, head)
 
 
 def directional_albedo(brdf, cos_o, n_theta=256, n_phi=128):

@@ -54,7 +54,7 @@ from tqdm.auto import tqdm
 from raycast.renderer import _cache_kernels
 from raycast.renderer.rays import check_directions, open3d_scene, orthonormal_basis, sun_samples_for
 from raycast.renderer.scene import Scene
-from raycast.renderer.shading import disk_shading
+from raycast.renderer.shading import shaded_pairs
 
 __all__ = ["SceneCache", "cube_grid_directions", "cube_grid_weights"]
 
@@ -72,8 +72,6 @@ _MERGE_FRACTION = 3.0
 _WEAK_LOBE_SHARE = 0.2
 # Frames per batch of the run time (bounds its buffers of pairs for exact rays and of lit classes).
 _FRAMES_PER_CHUNK = 256
-# Lit classes shaded per BRDF call at most.
-_SHADING_ROWS = 1 << 16
 # An element is cut in four where its quarters see differently in more than this fraction of
 # its upper-hemisphere directions (see _split_where_partly_visible).
 _SPLIT_FRACTION = 0.05
@@ -377,31 +375,28 @@ class SceneCache:
         return total
 
     def _shaded(self, pose, frames, classes, area, normal, geo, sun, obs):
-        """(m,) I/E of the lit classes (:func:`_lit_classes`): one BRDF evaluation per material
-        on its (frame, class) pairs, at the class's mean shading and geometric normals
-        (raycast.renderer.shading.disk_shading)."""
+        """(m,) I/E of the lit classes (:func:`_lit_classes`): each material's (frame, class)
+        pairs shaded at the class's mean shading and geometric normals
+        (raycast.renderer.shading.shaded_pairs)."""
         total = np.zeros(len(sun))
         bend = self.scene.specular_normals == "cycles"
         sun_u, sun_v = orthonormal_basis(sun)
+        per_pair = [np.ascontiguousarray(a, dtype=float) for a in (area, normal, geo)]
         for material, begin, end in pose.material_blocks:
-            of_material = np.flatnonzero((classes >= begin) & (classes < end))
-            # In blocks of rows, so the BRDF's temporaries stay in the processor's cache (the
-            # all-Glossy paper mesh has 2 million lit classes per 150 frames: 30% faster).
-            for first in range(0, len(of_material), _SHADING_ROWS):
-                rows = of_material[first : first + _SHADING_ROWS]
-                f = frames[rows]
-                shading = disk_shading(
-                    self.scene.brdfs[material],
-                    self.sun_samples[material],
-                    normal[rows],
-                    geo[rows],
-                    obs[f],
-                    sun[f],
-                    sun_u[f],
-                    sun_v[f],
-                    bend,
-                )
-                total += np.bincount(f, weights=area[rows] * shading, minlength=len(sun))
+            rows = np.flatnonzero((classes >= begin) & (classes < end))
+            shaded_pairs(
+                self.scene.brdfs[material],
+                self.sun_samples[material],
+                rows,
+                frames,
+                *per_pair,
+                obs,
+                sun,
+                sun_u,
+                sun_v,
+                bend,
+                total,
+            )
         return total
 
     @property
