@@ -74,7 +74,7 @@ def test_shaded_pairs_sums_each_pair_into_its_frame():
     area = np.random.default_rng(5).random(600)
     rows = np.flatnonzero(np.arange(600) % 3 != 0)  # a subset, as one material's pairs
     total = np.zeros(5)
-    shaded_pairs(brdf, 7, rows, frames, area, normal, geo, *per_frame, True, total)
+    shaded_pairs(brdf, 7, rows, frames, frames, area, normal, geo, *per_frame, True, total)
     each = reference_disk_shading(brdf, 7, normal, geo, *(a[frames] for a in per_frame), True)
     expected = np.bincount(frames[rows], weights=(area * each)[rows], minlength=5)
     assert np.all(expected > 0.0)

@@ -162,10 +162,10 @@ def bent_normal(gx, gy, gz, ox, oy, oz, sx, sy, sz):
 
 
 @njit(cache=True, nogil=True)
-def shaded_pairs(packed, offsets, weights, bend, rows, frames, area, normal, geo, wo, sun, sun_u, sun_v, total):
+def shaded_pairs(packed, offsets, weights, bend, rows, frames, into, area, normal, geo, wo, sun, sun_u, sun_v, total):
     """Add area x :func:`raycast.renderer.shading.disk_shading` of the pairs ``rows`` into
-    ``total`` at their frames: pair ``r`` has ``area[r]``, normals ``normal[r]``, ``geo[r]`` and
-    frame ``f = frames[r]``, whose vectors are ``wo[f]``, ``sun[f]``, ``sun_u[f]``, ``sun_v[f]``.
+    ``total[into[r]]``: pair ``r`` has ``area[r]``, normals ``normal[r]``, ``geo[r]`` and frame
+    ``f = frames[r]``, whose vectors are ``wo[f]``, ``sun[f]``, ``sun_u[f]``, ``sun_v[f]``.
 
     One loop, all in scalars: a helper taking array rows (views) or the arrays themselves costs
     three times the shading.
@@ -195,7 +195,7 @@ def shaded_pairs(packed, offsets, weights, bend, rows, frames, area, normal, geo
             cos_io = wx * ox + wy * oy + wz * oz
             spec_i = bx * wx + by * wy + bz * wz
             value += weights[q] * shade(packed, cos_i, cos_o, cos_io, spec_i, spec_o, bend)
-        total[f] += area[r] * value
+        total[into[r]] += area[r] * value
 
 
 def as_packed(lobe_curves, head):

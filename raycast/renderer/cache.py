@@ -389,6 +389,7 @@ class SceneCache:
                 self.sun_samples[material],
                 rows,
                 frames,
+                frames,
                 *per_pair,
                 obs,
                 sun,

@@ -47,7 +47,7 @@ from raycast.renderer.rays import (
 )
 from raycast.renderer.refine import AdaptiveSampler, EdgeTopology, coarse_levels, surface_classes
 from raycast.renderer.scene import Scene
-from raycast.renderer.shading import disk_shading
+from raycast.renderer.shading import shaded_pairs
 
 __all__ = ["DirectRenderer", "AccuracyOutOfReach", "SAMPLINGS", "convex_groups"]
 
@@ -322,10 +322,15 @@ class DirectRenderer:
                 geo_normals = mesh.face_normals[prim] * np.where(cos_o[prim, frames] < 0.0, -1.0, 1.0)[:, None]
                 normals = geo_normals.copy()
                 _direct_kernels.interpolated_normals(normals, np.arange(len(rest)), prim, uv[rest], mesh.corner_normals)
-                result += np.bincount(
+                self._radiance(
+                    mesh.material_index[prim],
+                    normals,
                     frames,
-                    weights=self._radiance(mesh.material_index[prim], normals, frames, sun_body, obs_body, geo_normals),
-                    minlength=len(result),
+                    sun_body,
+                    obs_body,
+                    geo_normals,
+                    into=frames,
+                    total=result,
                 )
         return result * h * h
 
@@ -374,32 +379,40 @@ class DirectRenderer:
         )
         return total, reached
 
-    def _radiance(self, materials, normals, frames, sun_body, obs_body, geo_normals, smooth=True):
-        """Per hit f(s, o, n) cos(i) over the solar disk (:func:`raycast.renderer.shading.disk_shading`)
+    def _radiance(
+        self, materials, normals, frames, sun_body, obs_body, geo_normals, smooth=True, into=None, total=None
+    ):
+        """Per hit f(s, o, n) cos(i) over the solar disk (:func:`raycast.renderer.shading.shaded_pairs`)
         times the share of the disk above the face (:func:`raycast.renderer.rays.sun_fraction`),
         (k,) for (k,) materials, (k, 3) shading normals, (k, 3) face normals turned toward the
         observer and (k,) frames of the (m, 3) Sun and observer directions. On ``smooth`` hits
         specular lobes are evaluated about the valid-reflection normal when the scene says so
-        (``Scene.specular_normals``)."""
-        total = np.zeros(len(materials))
+        (``Scene.specular_normals``). With ``into`` (k,) and ``total``, each hit is added into
+        ``total[into]`` instead (a frame's sum without a (k,) array per frame vector)."""
         mesh = self._state["mesh"]
         bend = smooth and self.scene.specular_normals == "cycles"
         sun_u, sun_v = orthonormal_basis(sun_body)
+        share = sun_fractions(np.einsum("ij,ij->i", geo_normals, sun_body[frames]))
+        if into is None:
+            into, total = np.arange(len(materials)), np.zeros(len(materials))
+        per_hit = [np.ascontiguousarray(a, dtype=float) for a in (normals, geo_normals)]
         for material in np.unique(materials):
-            idx = np.flatnonzero(materials == material)
-            frame = frames[idx]
-            total[idx] = disk_shading(
+            shaded_pairs(
                 mesh.brdfs[material],
                 self._state["sun_samples"][material],
-                normals[idx],
-                geo_normals[idx],
-                obs_body[frame],
-                sun_body[frame],
-                sun_u[frame],
-                sun_v[frame],
+                np.flatnonzero(materials == material),
+                frames,
+                into,
+                share,
+                *per_hit,
+                obs_body,
+                sun_body,
+                sun_u,
+                sun_v,
                 bend,
+                total,
             )
-        return total * sun_fractions(np.einsum("ij,ij->i", geo_normals, sun_body[frames]))
+        return total
 
     def _flat_radiance(self, sun_body, obs_body, triangles=None):
         """(m, t) radiance of every triangle, flat-shaded with its face normal turned toward

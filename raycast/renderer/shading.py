@@ -50,24 +50,28 @@ def disk_shading(brdf, n_samples, normal, geo, wo, sun, sun_u, sun_v, bend):
     -------
     (k,) float
     """
-    # Each point is a pair of its own frame.
+    # Each point is a pair of its own frame, added into its own slot.
     points = np.arange(len(normal))
     out = np.zeros(len(normal))
-    shaded_pairs(brdf, n_samples, points, points, np.ones(len(normal)), normal, geo, wo, sun, sun_u, sun_v, bend, out)
+    shaded_pairs(
+        brdf, n_samples, points, points, points, np.ones(len(normal)), normal, geo, wo, sun, sun_u, sun_v, bend, out
+    )
     return out
 
 
-def shaded_pairs(brdf, n_samples, rows, frames, area, normal, geo, obs, sun, sun_u, sun_v, bend, total):
-    """Add ``area`` x :func:`disk_shading` of the pairs ``rows`` into ``total`` at their frames.
+def shaded_pairs(brdf, n_samples, rows, frames, into, area, normal, geo, obs, sun, sun_u, sun_v, bend, total):
+    """Add ``area`` x :func:`disk_shading` of the pairs ``rows`` into ``total[into]``.
 
     Parameters
     ----------
     brdf, n_samples, bend : as :func:`disk_shading`.
     rows : (r,) int64, the pairs to shade (indices into the per-pair arrays).
-    frames : (k,) int64, each pair's frame; area : (k,) float, its weight.
+    frames : (k,) int64, each pair's frame (the row of the per-frame vectors it is seen with).
+    into : (k,) int64, where in ``total`` each pair's value is added (its frame, or its own slot).
+    area : (k,) float, each pair's weight.
     normal, geo : (k, 3) float, each pair's shading and turned face normal.
     obs, sun, sun_u, sun_v : (m, 3) float, per frame, as ``wo``, ``sun``, ``sun_u``, ``sun_v``.
-    total : (m,) float, added to in place.
+    total : float array, added to in place.
     """
     packed = brdf.packed()
     if packed is None:
@@ -75,11 +79,11 @@ def shaded_pairs(brdf, n_samples, rows, frames, area, normal, geo, obs, sun, sun
         shading = reference_disk_shading(
             brdf, n_samples, normal[rows], geo[rows], obs[f], sun[f], sun_u[f], sun_v[f], bend
         )
-        total += np.bincount(f, weights=area[rows] * shading, minlength=len(total))
+        total += np.bincount(into[rows], weights=area[rows] * shading, minlength=len(total))
         return
     offsets, weights = sun_disk_rule(n_samples)
     per_pair = (np.ascontiguousarray(a, dtype=float) for a in (area, normal, geo, obs, sun, sun_u, sun_v))
-    _shading_kernels.shaded_pairs(packed, offsets, weights, bool(bend), rows, frames, *per_pair, total)
+    _shading_kernels.shaded_pairs(packed, offsets, weights, bool(bend), rows, frames, into, *per_pair, total)
 
 
 def reference_disk_shading(brdf, n_samples, normal, geo, wo, sun, sun_u, sun_v, bend):
