@@ -74,14 +74,15 @@ def _unit(a):
     return (a / np.linalg.norm(a, axis=1, keepdims=True)).astype(np.float32)
 
 
-@pytest.mark.parametrize("n_extra", [0, 3])
-def test_lit_classes_sum_gated_group_areas_into_sorted_classes(n_extra):
+@pytest.mark.parametrize("n_extra, n_groups, n_classes", [(0, 7, 4), (3, 7, 4), (3, 150, 20)])
+def test_lit_classes_sum_gated_group_areas_into_sorted_classes(n_extra, n_groups, n_classes):
     """Agreed bits, the mixed pairs' open fractions, exposed areas and factorised weights, gated
-    by each group's geometric normal and summed into its class, against the same in numpy."""
-    case = _case(5, n_elements=130, n_frames=25)
+    by each group's geometric normal and summed into its class, against the same in numpy.
+    150 groups span three words of the kernel's bitmap of groups with area."""
+    case = _case(5, n_elements=130, n_frames=25, n_groups=n_groups)
     bits, sun_nodes, obs_nodes, _, _, normals, area = case
     rng = np.random.default_rng(6)
-    m, n_groups, n_classes = len(sun_nodes), area.shape[0], 4
+    m = len(sun_nodes)
     sun, obs = _unit(rng.normal(size=(m, 3))), _unit(rng.normal(size=(m, 3)))
     # Normals in the xy plane and every third Sun close to it: groups lit by part of the disk.
     sun[::3] = _unit(np.c_[2e-3 * rng.normal(size=(len(sun[::3]), 2)), np.ones(len(sun[::3]))])

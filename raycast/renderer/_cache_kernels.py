@@ -206,7 +206,10 @@ def lit_classes(
     the group's geometric normal (max(n_geo . obs, 0) and the part of the solar disk above its
     plane, :func:`raycast.renderer.rays.sun_fraction`) and summed into the group's class with
     the group's shading and geometric normals. One frame at a time, so no (frames, groups)
-    array is held; ``group_class`` must be sorted (each class's groups in one run).
+    array is held; ``group_class`` must be sorted (each class's groups in one run). Only the
+    groups with area in the frame are visited: the exposed ones and those the frame's bits,
+    pairs or factors touched (a bitmap of groups; the all-Glossy paper mesh has 138 625 groups
+    and a frame lights a fraction of them).
 
     Returns
     -------
@@ -226,6 +229,13 @@ def lit_classes(
     out_geo = np.empty((capacity, 3))
     count = 0
     zero, one = np.uint64(0), np.uint64(1)
+    # Groups with area this frame, a bit each: the exposed ones always, the others as touched.
+    n_group_words = (n_groups + 63) // 64
+    exposed = np.zeros(n_group_words, dtype=np.uint64)
+    for g in range(n_groups):
+        if area_exposed[g] != 0.0:
+            exposed[g >> 6] |= one << np.uint64(g & 63)
+    touched = exposed.copy()
     pair = 0
     run_group, run_area = 0, 0.0
     for f in range(m):
@@ -253,19 +263,25 @@ def lit_classes(
                         run_area += area[k]
                     else:
                         weight[run_group] += run_area
+                        touched[run_group >> 6] |= one << np.uint64(run_group & 63)
                         run_group, run_area = group[k], area[k]
         if run_area != 0.0:
             weight[run_group] += run_area
+            touched[run_group >> 6] |= one << np.uint64(run_group & 63)
         run_group, run_area = 0, 0.0
         while pair < len(pair_frames) and pair_frames[pair] == f:
             value = pair_open[pair]
             if value != 0.0:
                 e = pair_elements[pair]
                 for k in range(ptr[e], ptr[e + 1]):
-                    weight[group[k]] += value * area[k]
+                    g = group[k]
+                    weight[g] += value * area[k]
+                    touched[g >> 6] |= one << np.uint64(g & 63)
             pair += 1
         for j in range(len(extra_groups)):
-            weight[extra_groups[j]] += extra_weight[f, j]
+            g = extra_groups[j]
+            weight[g] += extra_weight[f, j]
+            touched[g >> 6] |= one << np.uint64(g & 63)
         if count + n_classes > capacity:
             capacity = max(2 * capacity, count + n_classes)
             out_frames = _grown(out_frames, capacity, count)
@@ -278,7 +294,20 @@ def lit_classes(
         # Groups come sorted by class (SceneCache.build): each class is summed in one run.
         current = -1
         total, nx, ny, nz, gx_sum, gy_sum, gz_sum = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-        for g in range(n_groups + 1):
+        word, bits = 0, touched[0] if n_group_words else zero
+        while True:
+            # The next group with area, in order (n_groups past the last: flushes the last class).
+            while bits == zero and word + 1 < n_group_words:
+                touched[word] = exposed[word]
+                word += 1
+                bits = touched[word]
+            if bits == zero:
+                if n_group_words:
+                    touched[word] = exposed[word]
+                g = n_groups
+            else:
+                g = 64 * word + _lowest_bit(bits)
+                bits &= bits - one
             c = group_class[g] if g < n_groups else -2
             if c != current:
                 if total > 0.0:
