@@ -44,6 +44,8 @@ import numpy as np
 from scipy.optimize import differential_evolution, minimize
 from tqdm.auto import tqdm
 
+from rsodb.pool import SINGLE_THREAD_ENV
+
 __all__ = [
     "SamplerSettings",
     "ChainRun",
@@ -56,7 +58,6 @@ __all__ = [
 ]
 
 CHAIN_GROUP = "mcmc"
-_SINGLE_THREAD_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 # Stand-in for -ln p where the posterior is zero, for the minimiser (it needs finite values).
 _IMPOSSIBLE = 1e30
 # emcee's guidance: trust the autocorrelation time, and the posterior, when the chain after
@@ -338,8 +339,8 @@ def _open_pool(posterior, search_posterior, processes: int) -> _ProcessPool | No
     # Each worker is one of `processes` on a small machine: one BLAS/OpenMP thread each, or
     # they fight over the cores. The executor spawns its workers lazily, so the variables stay
     # set until the pool is closed.
-    saved = {key: os.environ.get(key) for key in _SINGLE_THREAD_ENV}
-    os.environ.update(_SINGLE_THREAD_ENV)
+    saved = {key: os.environ.get(key) for key in SINGLE_THREAD_ENV}
+    os.environ.update(SINGLE_THREAD_ENV)
     # spawn, not fork: the parent may hold threads (tqdm, Dask, Open3D) that fork would copy
     # in a locked state.
     executor = ProcessPoolExecutor(
