@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from raycast.renderer.brdf import BRDF, GGX, Lambertian, Principled
-from raycast.renderer.rays import orthonormal_basis
+from raycast.renderer.rays import orthonormal_basis, sun_fractions
 from raycast.renderer.shading import disk_shading, reference_disk_shading, shaded_pairs
 
 BRDFS = [
@@ -64,7 +64,11 @@ def test_compiled_shading_equals_the_numpy_reference(brdf, n_samples, bend):
     np.testing.assert_allclose(compiled, reference, rtol=1e-10, atol=1e-15)
 
 
-def test_shaded_pairs_sums_each_pair_into_its_frame():
+@pytest.mark.parametrize("disk_share", [False, True])
+def test_shaded_pairs_sums_each_pair_into_its_frame(disk_share):
+    """Pairs read their frame's vectors and add into it; with ``disk_share`` each is also
+    weighted by the share of the solar disk above its face (a quarter of the Suns of
+    :func:`_points` are within a degree of the plane, where the share is between 0 and 1)."""
     brdf = Principled(0.4, metallic=0.2, roughness=0.3)
     normal, geo, wo, sun, sun_u, sun_v = _points(600, seed=3)
     # 600 pairs over 5 frames; each frame's vectors are its first pair's.
@@ -74,8 +78,12 @@ def test_shaded_pairs_sums_each_pair_into_its_frame():
     area = np.random.default_rng(5).random(600)
     rows = np.flatnonzero(np.arange(600) % 3 != 0)  # a subset, as one material's pairs
     total = np.zeros(5)
-    shaded_pairs(brdf, 7, rows, frames, frames, area, normal, geo, *per_frame, True, total)
+    shaded_pairs(brdf, 7, rows, frames, frames, area, normal, geo, *per_frame, True, total, disk_share=disk_share)
     each = reference_disk_shading(brdf, 7, normal, geo, *(a[frames] for a in per_frame), True)
+    share = sun_fractions(np.einsum("ij,ij->i", geo, per_frame[1][frames]))
+    if disk_share:
+        assert np.any((share[rows] > 0.0) & (share[rows] < 1.0))
+        each = each * share
     expected = np.bincount(frames[rows], weights=(area * each)[rows], minlength=5)
     assert np.all(expected > 0.0)
     np.testing.assert_allclose(total, expected, rtol=1e-12)

@@ -33,7 +33,7 @@ import math
 from numba import njit
 import numpy as np
 
-from raycast.renderer.rays import SUN_RADIUS_RAD, risen_sun
+from raycast.renderer.rays import SUN_RADIUS_RAD, risen_sun, sun_fraction
 
 LAMBERTIAN, GGX, PRINCIPLED = 0, 1, 2
 CURVES = 16
@@ -162,10 +162,14 @@ def bent_normal(gx, gy, gz, ox, oy, oz, sx, sy, sz):
 
 
 @njit(cache=True, nogil=True)
-def shaded_pairs(packed, offsets, weights, bend, rows, frames, into, area, normal, geo, wo, sun, sun_u, sun_v, total):
+def shaded_pairs(
+    packed, offsets, weights, bend, disk_share, rows, frames, into, area, normal, geo, wo, sun, sun_u, sun_v, total
+):
     """Add area x :func:`raycast.renderer.shading.disk_shading` of the pairs ``rows`` into
     ``total[into[r]]``: pair ``r`` has ``area[r]``, normals ``normal[r]``, ``geo[r]`` and frame
-    ``f = frames[r]``, whose vectors are ``wo[f]``, ``sun[f]``, ``sun_u[f]``, ``sun_v[f]``.
+    ``f = frames[r]``, whose vectors are ``wo[f]``, ``sun[f]``, ``sun_u[f]``, ``sun_v[f]``. With
+    ``disk_share`` each value is also multiplied by the share of the solar disk above the face
+    (:func:`raycast.renderer.rays.sun_fraction` of ``geo[r] . sun[f]``).
 
     One loop, all in scalars: a helper taking array rows (views) or the arrays themselves costs
     three times the shading.
@@ -195,6 +199,8 @@ def shaded_pairs(packed, offsets, weights, bend, rows, frames, into, area, norma
             cos_io = wx * ox + wy * oy + wz * oz
             spec_i = bx * wx + by * wy + bz * wz
             value += weights[q] * shade(packed, cos_i, cos_o, cos_io, spec_i, spec_o, bend)
+        if disk_share:
+            value *= sun_fraction(gx * sun[f, 0] + gy * sun[f, 1] + gz * sun[f, 2])
         total[into[r]] += area[r] * value
 
 

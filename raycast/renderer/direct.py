@@ -42,7 +42,6 @@ from raycast.renderer.rays import (
     check_directions,
     open3d_scene,
     orthonormal_basis,
-    sun_fractions,
     sun_samples_for,
 )
 from raycast.renderer.refine import AdaptiveSampler, EdgeTopology, coarse_levels, surface_classes
@@ -392,10 +391,9 @@ class DirectRenderer:
         mesh = self._state["mesh"]
         bend = smooth and self.scene.specular_normals == "cycles"
         sun_u, sun_v = orthonormal_basis(sun_body)
-        share = sun_fractions(np.einsum("ij,ij->i", geo_normals, sun_body[frames]))
         if into is None:
             into, total = np.arange(len(materials)), np.zeros(len(materials))
-        per_hit = [np.ascontiguousarray(a, dtype=float) for a in (normals, geo_normals)]
+        per_hit = [np.ascontiguousarray(a, dtype=float) for a in (np.ones(len(materials)), normals, geo_normals)]
         for material in np.unique(materials):
             shaded_pairs(
                 mesh.brdfs[material],
@@ -403,7 +401,6 @@ class DirectRenderer:
                 np.flatnonzero(materials == material),
                 frames,
                 into,
-                share,
                 *per_hit,
                 obs_body,
                 sun_body,
@@ -411,6 +408,7 @@ class DirectRenderer:
                 sun_v,
                 bend,
                 total,
+                disk_share=True,
             )
         return total
 

@@ -24,7 +24,7 @@ import numpy as np
 
 from raycast.renderer import _shading_kernels
 from raycast.renderer.brdf import valid_reflection_normal
-from raycast.renderer.rays import SUN_RADIUS_RAD, risen_suns, sun_disk_rule
+from raycast.renderer.rays import SUN_RADIUS_RAD, risen_suns, sun_disk_rule, sun_fractions
 
 __all__ = ["disk_shading", "reference_disk_shading", "shaded_pairs"]
 
@@ -59,7 +59,9 @@ def disk_shading(brdf, n_samples, normal, geo, wo, sun, sun_u, sun_v, bend):
     return out
 
 
-def shaded_pairs(brdf, n_samples, rows, frames, into, area, normal, geo, obs, sun, sun_u, sun_v, bend, total):
+def shaded_pairs(
+    brdf, n_samples, rows, frames, into, area, normal, geo, obs, sun, sun_u, sun_v, bend, total, disk_share=False
+):
     """Add ``area`` x :func:`disk_shading` of the pairs ``rows`` into ``total[into]``.
 
     Parameters
@@ -72,6 +74,9 @@ def shaded_pairs(brdf, n_samples, rows, frames, into, area, normal, geo, obs, su
     normal, geo : (k, 3) float, each pair's shading and turned face normal.
     obs, sun, sun_u, sun_v : (m, 3) float, per frame, as ``wo``, ``sun``, ``sun_u``, ``sun_v``.
     total : float array, added to in place.
+    disk_share : bool, also multiply by the share of the solar disk above each face
+        (:func:`raycast.renderer.rays.sun_fraction`; the direct renderer's hits; the fast path's
+        areas already hold it).
     """
     packed = brdf.packed()
     if packed is None:
@@ -79,11 +84,15 @@ def shaded_pairs(brdf, n_samples, rows, frames, into, area, normal, geo, obs, su
         shading = reference_disk_shading(
             brdf, n_samples, normal[rows], geo[rows], obs[f], sun[f], sun_u[f], sun_v[f], bend
         )
+        if disk_share:
+            shading *= sun_fractions(np.einsum("ij,ij->i", geo[rows], sun[f]))
         total += np.bincount(into[rows], weights=area[rows] * shading, minlength=len(total))
         return
     offsets, weights = sun_disk_rule(n_samples)
     per_pair = (np.ascontiguousarray(a, dtype=float) for a in (area, normal, geo, obs, sun, sun_u, sun_v))
-    _shading_kernels.shaded_pairs(packed, offsets, weights, bool(bend), rows, frames, into, *per_pair, total)
+    _shading_kernels.shaded_pairs(
+        packed, offsets, weights, bool(bend), bool(disk_share), rows, frames, into, *per_pair, total
+    )
 
 
 def reference_disk_shading(brdf, n_samples, normal, geo, wo, sun, sun_u, sun_v, bend):
