@@ -94,8 +94,9 @@ def whole_pass(args, argv) -> int:
     import json
 
     from ingest import read_file
+    from raycast.geometry.pass_geometry import choose_n_sub
     from rsodb.fit.config import FitConfig
-    from rsodb.fit.runner import FitProblem, fit_problem
+    from rsodb.fit.runner import FitProblem, fit_problem, spin_period_bounds
 
     if args.pass_name == "topex-whole":
         observed = read_file(TOPEX_PHV)[0]
@@ -133,10 +134,16 @@ def whole_pass(args, argv) -> int:
         return 0
     load = os.getloadavg()
     mode = "until converged" if args.until_converged else f"{args.walkers} x {args.steps}"
+    # The fit's own rule (2 deg of turn a sub-sample at the prior's fastest period) may ask more.
+    n_sub = problem.posterior.model.geometry.n_sub
+    rule = choose_n_sub(observed.exposure_s, spin_period_bounds(problem.posterior.space)[0])
+    n_sub_text = f"{n_sub} exposure sub-sample(s) of the {observed.exposure_s:g} s exposures" + (
+        f" (a fit left to its default would take {rule})" if rule != n_sub else ""
+    )
     section = f"""
 ## Whole-pass fit speed: {args.pass_name}, {mode} ({today()}, bench/fit.py)
 
-{what}; {problem.selection.description}; {args.walkers} walkers x {result.n_steps} steps after a global
+{what}; {problem.selection.description}; {n_sub_text}; {args.walkers} walkers x {result.n_steps} steps after a global
 search, {args.processes or os.cpu_count()} processes, load average {load[0]:.1f} at the end (shared machine).
 Wall time {fit_wall:.0f} s ({fit_wall / 60:.1f} min) against a target of {target / 60:.0f} min: {met}.
 Sampler: {result.verdict.rstrip(".")}. Residual RMS over every sample of the window {result.residual_rms_mag:.3f} mag.
