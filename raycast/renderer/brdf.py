@@ -44,7 +44,7 @@ Principled
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cache
+from functools import lru_cache
 import math
 
 from numba import njit, vectorize
@@ -80,6 +80,9 @@ fresnel_dielectric = dielectric_fresnel
 # The view cosines of the tables' nodes: a table read there gives the node's value.
 _E_NODES = np.linspace(0.0, 1.0, _shading_kernels.E_NODES)
 _S_NODES = np.linspace(0.0, 1.0, _shading_kernels.S_NODES)
+# Packed BRDFs kept for reuse (the renderers ask once per material and batch of frames). Bounded:
+# a fit that frees a BRDF parameter makes a new BRDF at every evaluation.
+_PACKED_KEPT = 256
 
 
 def _dot(a, b):
@@ -331,7 +334,7 @@ class GGX(BRDF):
         value, _ = _ggx_lobe(ci, co, cos_io, self.alpha, self.masking, valid)
         return self.color * value * np.maximum(ci, 0.0) * self._scattering(co)
 
-    @cache
+    @lru_cache(maxsize=_PACKED_KEPT)
     def packed(self):
         multi = self.distribution == "MULTI_GGX"
         head = (_shading_kernels.GGX, self.color, self.alpha, self.masking == "separable", multi)
@@ -466,11 +469,14 @@ class Principled(BRDF):
             ).factor(co)
         return (1.0 - self.metallic) * dielectric + self.metallic * metal * specular_cosine
 
-    @cache
+    @lru_cache(maxsize=_PACKED_KEPT)
     def packed(self):
         multi = self.distribution == "MULTI_GGX"
-        f0_eta = _f0_from_ior(self.eta)
-        metal_fms = _MultipleScattering(self.roughness, self.base_color + (1.0 - self.base_color) / 21.0).fms
+        # Only a MULTI_GGX lobe reads the energy-compensation tables (they cost quadrature on first use).
+        fms = (0.0, 0.0)
+        if multi:
+            metal = _MultipleScattering(self.roughness, self.base_color + (1.0 - self.base_color) / 21.0)
+            fms = (self._dielectric_scattering().fms, metal.fms)
         head = (
             _shading_kernels.PRINCIPLED,
             self.base_color,
@@ -479,9 +485,8 @@ class Principled(BRDF):
             multi,
             self.f0,
             self.eta,
-            f0_eta,
-            self._dielectric_scattering().fms if multi else 0.0,
-            metal_fms if multi else 0.0,
+            _f0_from_ior(self.eta),
+            *fms,
         )
         curves = (
             ggx_albedo(self.roughness, _E_NODES) if multi else (),
