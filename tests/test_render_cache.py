@@ -8,6 +8,7 @@ import pytest
 
 from raycast.geometry.attitude import PrecessingSpin
 from raycast.models import topex
+from raycast.renderer import cache as cache_module
 from raycast.renderer.brdf import GGX, Lambertian
 from raycast.renderer.cache import SceneCache, cube_grid_directions, cube_grid_weights
 from raycast.renderer.direct import DirectRenderer
@@ -38,6 +39,40 @@ def test_cube_grid_interpolation():
     index, weight = cube_grid_weights(query, n)
     values = (weight * directions[index][..., 2]).sum(axis=1)
     assert np.abs(values - query[:, 2]).max() < (math.radians(90.0 / n)) ** 2
+
+
+def test_row_ids_number_rows_as_a_two_dimensional_unique():
+    rng = np.random.default_rng(4)
+    columns = [
+        rng.integers(0, 3, 5000),
+        rng.integers(-2_000_000, 2_000_000, 5000) // 400_000,
+        rng.integers(-5, 5, 5000),
+    ]
+    ids, counts = cache_module._row_ids(5000, iter(columns))
+    _, expected_ids, expected_counts = np.unique(
+        np.column_stack(columns), axis=0, return_inverse=True, return_counts=True
+    )
+    np.testing.assert_array_equal(ids, expected_ids.reshape(-1))
+    np.testing.assert_array_equal(counts, expected_counts)
+
+
+def test_factorisation_gives_up_only_on_a_residual_that_cannot_reach_its_budget():
+    columns = np.arange(1, 25)
+    # Halving per doubling of the columns: 4 budgets at 24 columns reach 1 at 96.
+    falling = 4.0 * (24.0 / columns)
+    assert not cache_module._hopeless(falling, 1.0, 100)
+    # Three budgets at 24 columns, falling 10% over the second half: more than 4/3 at 100.
+    flat = 3.0 * (24.0 / columns) ** 0.15
+    assert cache_module._hopeless(100.0 * flat, 1.0, 100)
+    assert not cache_module._hopeless(flat, 1.0, 100)
+    assert not cache_module._hopeless(0.2 * flat, 1.0, 100)  # within the budget already
+
+
+def test_group_basis_is_orthonormal_in_32_bits():
+    sketch = np.random.default_rng(5).standard_normal((3000, 40)).astype(np.float32)
+    basis = cache_module._orthonormal(sketch.copy())
+    assert basis.dtype == np.float32
+    assert np.abs(basis.T.astype(float) @ basis - np.eye(40)).max() < 1e-5
 
 
 def test_convex_scene_needs_no_visibility():

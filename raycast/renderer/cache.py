@@ -42,12 +42,13 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 import functools
+import itertools
 import math
 import time
 import weakref
 
 import numpy as np
-from scipy import sparse
+from scipy import linalg, sparse
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 from tqdm.auto import tqdm
 
@@ -66,6 +67,9 @@ _MAX_BISECTIONS = 24
 _FACTOR_MIN_ELEMENTS = 4
 # A group is factorised only into fewer columns than its elements over this (_visibility_factors).
 _FACTOR_ELEMENTS_PER_COLUMN = 8
+# A group's factorisation is given up when its residual, falling as it fell over the last
+# sketch's second half, would still exceed this many budgets at the largest rank allowed.
+_FACTOR_GIVE_UP = 4.0
 # Normals are grouped in bins of the material's normal step divided by this.
 _MERGE_FRACTION = 3.0
 # Lobes whose share of the reflectance is at most this are weak (see _normal_step_rad).
@@ -648,6 +652,7 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quant
         el_corners, el_normals, lambda c, n, p: _normal_spread_rad(n) > step[el_tri[p]]
     )
     del el_normals
+    el_corners = el_corners.astype(np.float32)  # read from here on only as the raw elements' corners, in 32 bits
     tri, geo = el_tri[piece_parent], parent_geo[piece_parent]
     normals[np.einsum("ij,ij->i", normals, geo) < 0.0] *= -1.0
     is_exposed = el_exposed[piece_parent]
@@ -672,7 +677,9 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quant
         never_blocked = occludable & ~blocked[np.maximum(of_element, 0)]
         el["exposed"][never_blocked] = True
         drop = occludable & ~seen[np.maximum(of_element, 0)] & blocked[np.maximum(of_element, 0)]
-        el = {key: value[~drop] for key, value in el.items()}
+        keep = ~drop
+        for key in el:  # one array at a time, each let go as its copy is made
+            el[key] = el[key][keep]
         of_element = of_element[~drop]
         of_element[el["exposed"]] = -1
         el["column"] = of_element
@@ -689,34 +696,39 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quant
     # Shading classes: material and binned shading normal, shared by every face. The BRDF is
     # evaluated once per class and frame; a smooth-shaded tube's normals then fall into a ring
     # of classes instead of (faces x bins).
-    class_key = np.column_stack([el["material"], np.round(el["normal"] / quantum)]).astype(np.int64)
-    _, shade_class = np.unique(class_key, axis=0, return_inverse=True)
-    shade_class = shade_class.reshape(-1)
+    shade_class, _ = _row_ids(
+        len(quantum),
+        itertools.chain([el["material"]], (np.round(el["normal"][:, k] / quantum[:, 0]) for k in range(3))),
+    )
     n_classes = int(shade_class.max()) + 1 if len(shade_class) else 0
     class_material = np.zeros(n_classes, dtype=np.int64)
     class_material[shade_class] = el["material"]
     # Class first in the key, so np.unique sorts the groups by class (each class is summed in
     # one run at run time, _cache_kernels.lit_classes) and so into one block per material.
-    key = np.column_stack([shade_class, np.round(el["geo"] / 1e-6)]).astype(np.int64)
-    _, group, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    group = group.reshape(-1)
+    group, counts = _row_ids(
+        len(shade_class), itertools.chain([shade_class], (np.round(el["geo"][:, k] / 1e-6) for k in range(3)))
+    )
     n_groups = len(counts)
     group_class = np.zeros(n_groups, dtype=np.int64)
     group_class[group] = shade_class
     normal_shade = np.zeros((n_groups, 3))
-    np.add.at(normal_shade, group, el["normal"] * weight_area[:, None])
+    np.add.at(normal_shade, group, el.pop("normal") * weight_area[:, None])
     normal_shade /= np.linalg.norm(normal_shade, axis=1, keepdims=True)
     normal_geo = np.zeros((n_groups, 3))
-    np.add.at(normal_geo, group, el["geo"] * weight_area[:, None])
+    np.add.at(normal_geo, group, el.pop("geo") * weight_area[:, None])
     normal_geo /= np.linalg.norm(normal_geo, axis=1, keepdims=True)
     area_exposed = np.zeros(n_groups)
     exposed_mask = el["exposed"].copy()
     exposed_mask[occl] = False
     np.add.at(area_exposed, group[exposed_mask], weight_area[exposed_mask])
     # Pieces of one group sharing a visibility element add their areas to one (group, element) pair.
-    pairs, pair_of = np.unique(np.column_stack([group[occl], el["column"][occl]]), axis=0, return_inverse=True)
+    # One integer per pair, group-major, so its sort is the pairs' (a two-column unique copies
+    # the pieces several times over).
+    span = int(el["column"].max()) + 1 if len(occl) else 1
+    pair_key, pair_of = np.unique(group[occl] * span + el["column"][occl], return_inverse=True)
+    pairs = np.column_stack([pair_key // span, pair_key % span])
     pair_area = np.bincount(pair_of.reshape(-1), weights=weight_area[occl], minlength=len(pairs))
-    del el, class_key, key, pair_of, weight_area, exposed_mask, group, shade_class
+    del el, pair_key, pair_of, weight_area, exposed_mask, group, shade_class
     starts = np.flatnonzero(np.r_[True, np.diff(pairs[:, 0]) != 0]) if len(pairs) else np.zeros(0, int)
     factors, factor_starts, factorised = _visibility_factors(
         visibility, len(directions), row_of[pairs[:, 1]], pair_area, starts, factor_tolerance
@@ -751,13 +763,13 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quant
     # (_visibility leaves them set for the cosine gate): an element facing well away from the
     # Sun or the observer then has no bit set around it, and the run time passes over it.
     raw_bits = np.zeros((len(directions), -(-len(raw_columns) // 64)), dtype=np.uint64)
-    for begin in range(0, len(raw_columns), 2 * 64):  # whole words at a time
-        columns = raw_columns[begin : begin + 2 * 64]
-        above = directions @ raw_geo[begin : begin + 2 * 64].T > -band
+    for begin in range(0, len(raw_columns), 64):  # a word at a time: (d, 64) float temporaries
+        columns = raw_columns[begin : begin + 64]
+        above = directions @ raw_geo[begin : begin + 64].T > -band
         words = _cache_kernels.pack_words(_unpacked(visibility[row_of[columns]], len(directions)).astype(bool) & above)
         raw_bits[:, begin // 64 : begin // 64 + words.shape[1]] = words
     del visibility  # the element-major copy: the bits and factors hold what the run time needs
-    raw_corners = el_corners[raw_columns].astype(np.float32) if len(raw_columns) else np.zeros((0, 3, 3), np.float32)
+    raw_corners = el_corners[raw_columns] if len(raw_columns) else np.zeros((0, 3, 3), np.float32)
     gap_ptr, gap_word, gap_mask, gap_rays = _horizon_gaps(mesh, raw_corners, raw_geo, raw_bits, directions, band)
     return _Pose(
         normal_shade.astype(np.float32),
@@ -783,6 +795,28 @@ def _build_pose(scene, directions, element_size_m, normal_step_rad, normal_quant
         n_rays + gap_rays,
         blocks,
     )
+
+
+def _row_ids(n, columns):
+    """Dense ids of the n rows of integer-valued ``columns`` (an iterable of (n,) arrays, read
+    one at a time), numbered in the rows'
+    lexicographic order, and each id's count: ``np.unique(np.column_stack(columns), axis=0,
+    return_inverse=True, return_counts=True)[1:]`` without its (n, k) copies (on the all-Glossy
+    COSMOS 2502 mesh, 390 000 pieces, those were the build's peak memory).
+    """
+    ids = np.zeros(n, dtype=np.int64)
+    if n == 0:
+        return ids, np.zeros(0, dtype=np.int64)
+    counts = np.array([n])
+    for column in columns:
+        column = np.asarray(column).astype(np.int64)
+        low = column.min()
+        # ids < n and the column's span < 2^32 here, so the key cannot overflow.
+        _, ids, counts = np.unique(
+            ids * (int(column.max()) - int(low) + 1) + (column - low), return_inverse=True, return_counts=True
+        )
+        ids = ids.reshape(-1)
+    return ids, counts
 
 
 def _quarters(corners, normals):
@@ -845,7 +879,10 @@ def _horizon_gaps(mesh, corners, normals, raw_bits, directions, band):
     # Elements per batch, whole words, so that a batch casts about _MAX_BUILD_RAYS: a node is
     # within the band above an element's plane for a share band / 2 of the directions.
     per_element = max(1, int(len(directions) * band / 2.0) * around.shape[1])
-    pairs_per_batch = max(1, _MAX_BUILD_RAYS // around.shape[1])  # (node, element) pairs: probes each
+    # (node, element) pairs, probes each: a quarter of _MAX_BUILD_RAYS, as each ray also takes
+    # its probe's direction in 64 bits and a few indices (on a small scene such as the bus and
+    # wings, full batches were a third of the build's peak memory).
+    pairs_per_batch = max(1, _MAX_BUILD_RAYS // (4 * around.shape[1]))
     chunk = 64 * max(1, _MAX_BUILD_RAYS // (64 * per_element))
     for begin in range(0, n_elements, chunk):
         end = min(begin + chunk, n_elements)
@@ -1031,9 +1068,11 @@ class _GroupMatrix:
 
     def transposed_times(self, y):
         """M y: (e, k) -> (d, k)."""
-        out = np.zeros((self.n_directions, y.shape[1]), dtype=np.float32)
+        # Accumulated in place by BLAS (Fortran order, beta = 1): ``out += block.T @ y`` would
+        # allocate a second (d, k) array per block.
+        out = np.zeros((self.n_directions, y.shape[1]), dtype=np.float32, order="F")
         for rows, block in self._blocks():
-            out += block.T @ y[rows]
+            out = linalg.blas.sgemm(1.0, block, y[rows], beta=1.0, c=out, trans_a=1, overwrite_c=1)
         return out
 
     def row_norms(self):
@@ -1057,13 +1096,14 @@ def _group_basis(matrix, n_elements, budget, rng):
         width = min(rank + 8, n_elements)
         sketch = matrix.times(rng.standard_normal((matrix.n_directions, width), dtype=np.float32))
         for _ in range(2):
-            sketch = matrix.times(matrix.transposed_times(np.linalg.qr(sketch)[0]))
-        basis = np.linalg.qr(sketch.astype(np.float64))[0]
-        projected = matrix.transposed_times(basis.astype(np.float32))  # (d, k) = M Q
+            sketch = matrix.times(matrix.transposed_times(_orthonormal(sketch)))
+        basis = _orthonormal(sketch)
+        del sketch
+        projected = matrix.transposed_times(basis)  # (d, k) = M Q
         # M's singular directions within the sketch: eigenvectors of the k x k Gram matrix.
         gram = sum(block.T @ block for _, block in _row_blocks(projected))
         rotation = np.linalg.eigh(gram)[1][:, ::-1]
-        basis = basis @ rotation
+        basis = basis @ rotation.astype(np.float32)
         # worst[r - 1] = max over directions of |R(s)|^2 when the first r columns are kept; a
         # block of directions at a time, so only M Q itself is held whole (in 32 bits).
         worst = np.full(projected.shape[1], -np.inf)
@@ -1076,9 +1116,39 @@ def _group_basis(matrix, n_elements, budget, rng):
         del projected
         good = np.flatnonzero(worst <= budget)
         if len(good) and good[0] + 1 < n_elements / _FACTOR_ELEMENTS_PER_COLUMN:
-            return basis[:, : int(good[0]) + 1]
+            return basis[:, : int(good[0]) + 1].copy()
+        if _hopeless(worst, budget, n_elements / _FACTOR_ELEMENTS_PER_COLUMN):
+            return None
         rank *= 2
     return None
+
+
+def _hopeless(worst, budget, largest_rank):
+    """Whether a residual curve ``worst`` (largest |R(s)|^2 with the first 1, 2, ... columns
+    kept) extrapolates to more than ``_FACTOR_GIVE_UP`` budgets at ``largest_rank`` columns.
+
+    At the default grid (32, 6534 directions) no group of the comparison scenes, COSMOS 2502 or
+    TOPEX factorises (the budget is 1e-3 of a group's area, and shadow edges fall differently on
+    each element): their first sketch (24 columns) stays 13-270 budgets off, and the doubled
+    sketches that followed were most of the build's time and its peak memory. The rule only
+    decides when to stop trying; a group given up keeps its exact bits.
+    """
+    width = len(worst)
+    if worst[-1] <= budget or width < 4:
+        return False
+    per_doubling = max(worst[width // 2 - 1] / worst[-1], 1.0)
+    doublings = max(math.log2(largest_rank / width), 0.0)
+    return worst[-1] / per_doubling**doublings > _FACTOR_GIVE_UP * budget
+
+
+def _orthonormal(sketch):
+    """Q of the (e, k) float32 sketch's thin QR, in 32 bits, overwriting the sketch.
+
+    Q's columns are orthonormal to ~1e-6, far inside the budget (1e-3 of a group's area);
+    numpy's QR computes in 64 bits, and its copies of a large group's sketch were the build's
+    peak memory (five times the sketch).
+    """
+    return linalg.qr(sketch, mode="economic", overwrite_a=True, check_finite=False)[0]
 
 
 def _row_blocks(array):
@@ -1131,7 +1201,7 @@ def _visibility_factors(visibility, n_directions, columns_of_pairs, area, starts
         basis = _group_basis(matrix, end - begin, tolerance * area[begin:end].sum(), rng)
         if basis is not None:
             factorised[index] = True
-            bases.append((matrix, basis.astype(np.float32)))
+            bases.append((matrix, basis))
     widths = [basis.shape[1] for _, basis in bases]
     factors = np.empty((n_directions, sum(widths)), dtype=np.float32)
     new_starts = np.r_[0, np.cumsum(widths)[:-1]].astype(int) if widths else np.zeros(0, int)
