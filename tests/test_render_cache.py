@@ -75,6 +75,20 @@ def test_group_basis_is_orthonormal_in_32_bits():
     assert np.abs(basis.T.astype(float) @ basis - np.eye(40)).max() < 1e-5
 
 
+def test_finer_elements_only_on_smooth_triangles_of_a_glossy_material():
+    parts = [
+        Part.cylinder("tube", 0.5, 2.0, "gloss", segments=24, cap_material="gloss"),
+        Part.box("bus", (1, 1, 1), "gloss", center_m=(0, 0, 2.0)),
+        Part.cylinder("drum", 0.5, 1.0, "matte", segments=24).transformed(offset_m=(0, 0, -2.0)),
+    ]
+    scene = Scene.from_parts(parts, {"gloss": GGX(0.5, 0.3), "matte": Lambertian(0.5)})
+    mesh = scene.posed()
+    strip = cache_module._glossy_strip(scene, mesh)
+    tube_side = (mesh.part_index == 0) & (np.abs(mesh.face_normals[:, 2]) < 0.5)
+    np.testing.assert_array_equal(strip, tube_side)  # not the caps, the box nor the Lambertian drum
+    assert not cache_module._glossy_strip(scene.with_brdfs(gloss=GGX(0.5, 0.9)), mesh).any()  # a broad lobe
+
+
 def test_convex_scene_needs_no_visibility():
     convex = SceneCache.build(Scene.from_parts([Part.box("box", (1, 2, 3), "m")], {"m": Lambertian(0.5)}))
     assert convex.poses[0].factors.shape[1] == 0
