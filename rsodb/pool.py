@@ -34,7 +34,7 @@ def ingest_readers() -> int:
 
 
 @contextmanager
-def _environment(values: dict) -> Iterator[None]:
+def environment(values: dict) -> Iterator[None]:
     """Set environment variables for the children spawned inside the block, then restore them."""
     saved = {key: os.environ.get(key) for key in values}
     os.environ.update(values)
@@ -101,7 +101,7 @@ def imap_in_pool(
             return
         chunksize = chunksize or max(1, len(items) // (4 * processes))
         context = multiprocessing.get_context("spawn")
-        with _environment(SINGLE_THREAD_ENV):
+        with environment(SINGLE_THREAD_ENV):
             pool = context.Pool(min(processes, len(items)))
         with pool:
             mapper = pool.imap if ordered else pool.imap_unordered

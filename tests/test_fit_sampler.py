@@ -73,13 +73,17 @@ def test_same_seed_gives_the_identical_chain_and_another_seed_does_not(tmp_path)
     assert not np.array_equal(first.chain, other.chain)
 
 
-def test_process_pool_reproduces_the_in_process_chain(tmp_path):
+def test_process_pool_reproduces_the_in_process_chain(tmp_path, monkeypatch):
     posterior = make_posterior()
     settings = SMALL.replace(n_steps=15)
     alone = run_sampler(posterior, settings, tmp_path / "alone.h5", progress=False)
+    monkeypatch.setenv("OMP_NUM_THREADS", "7")
+    monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
     pooled = run_sampler(posterior, settings.replace(processes=2), tmp_path / "pool.h5", progress=False)
     # The pool only moves evaluations to other processes; results come back in order.
     np.testing.assert_array_equal(alone.chain, pooled.chain)
+    # Its workers ran single-threaded; the caller's environment is as it was.
+    assert os.environ["OMP_NUM_THREADS"] == "7" and "OPENBLAS_NUM_THREADS" not in os.environ
 
 
 def test_a_stopped_run_resumes_into_the_uninterrupted_chain(tmp_path):

@@ -57,6 +57,7 @@ from raycast.renderer.ggx_tables import (
     fresnel_mean_fit,
     ggx_albedo,
     ggx_average_albedo,
+    smith_lambda,
 )
 
 __all__ = [
@@ -110,13 +111,6 @@ def ggx_distribution(cos_nh, alpha):
     alpha2 = alpha * alpha
     c2 = cos_nh * cos_nh
     return alpha2 / (np.pi * (1.0 + (alpha2 - 1.0) * c2) ** 2)
-
-
-def smith_lambda(cos_n, alpha):
-    """Smith Lambda of GGX for a direction at cosine ``cos_n`` to the normal, shape (m,)."""
-    c2 = np.clip(cos_n * cos_n, 1e-300, 1.0)
-    tan2 = np.maximum(1.0 / c2 - 1.0, 0.0)
-    return 0.5 * (np.sqrt(1.0 + alpha * alpha * tan2) - 1.0)
 
 
 def _f0_from_ior(ior):

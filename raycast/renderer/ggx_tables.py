@@ -83,9 +83,11 @@ def _half_vectors(alpha):
     )
 
 
-def _lambda(cos_n, alpha):
+def smith_lambda(cos_n, alpha):
+    """Smith Lambda of GGX for a direction at cosine ``cos_n`` to the normal, shape (m,)."""
     c2 = np.clip(cos_n * cos_n, 1e-300, 1.0)
-    return 0.5 * (np.sqrt(1.0 + alpha * alpha * np.maximum(1.0 / c2 - 1.0, 0.0)) - 1.0)
+    tan2 = np.maximum(1.0 / c2 - 1.0, 0.0)
+    return 0.5 * (np.sqrt(1.0 + alpha * alpha * tan2) - 1.0)
 
 
 def _hemisphere_means(roughness, mu, fresnel=None):
@@ -99,10 +101,10 @@ def _hemisphere_means(roughness, mu, fresnel=None):
     cos_hv = h @ view
     cos_l = 2.0 * cos_hv * h[:, 2] - mu
     ok = (cos_hv > 0.0) & (cos_l > 0.0)
-    lam_v = _lambda(np.array(mu), alpha)
+    lam_v = smith_lambda(np.array(mu), alpha)
     jacobian = np.where(ok, cos_hv / (mu * h[:, 2]), 0.0)
     if fresnel is None:
-        lam_l = _lambda(np.where(ok, cos_l, 1.0), alpha)
+        lam_l = smith_lambda(np.where(ok, cos_l, 1.0), alpha)
         return float(np.mean(jacobian / (1.0 + lam_v + lam_l)))
     return float(np.mean(jacobian / (1.0 + lam_v) * fresnel(np.clip(cos_hv, 0.0, 1.0))))
 

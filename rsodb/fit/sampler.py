@@ -27,6 +27,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from concurrent.futures import ProcessPoolExecutor
+import contextlib
 from dataclasses import asdict, dataclass, field
 import json
 import math
@@ -44,7 +45,7 @@ import numpy as np
 from scipy.optimize import differential_evolution, minimize
 from tqdm.auto import tqdm
 
-from rsodb.pool import SINGLE_THREAD_ENV
+from rsodb.pool import SINGLE_THREAD_ENV, environment
 
 __all__ = [
     "SamplerSettings",
@@ -315,7 +316,7 @@ class _ProcessPool:
 
     executor: Any
     processes: int
-    saved_environment: dict
+    environment: contextlib.ExitStack
 
     def map(self, fn: Callable, iterable) -> list:
         items = list(iterable)
@@ -325,11 +326,7 @@ class _ProcessPool:
 
     def close(self) -> None:
         self.executor.shutdown(wait=True, cancel_futures=True)
-        for key, value in self.saved_environment.items():
-            if value is None:
-                os.environ.pop(key, None)
-            else:
-                os.environ[key] = value
+        self.environment.close()
 
 
 def _open_pool(posterior, search_posterior, processes: int) -> _ProcessPool | None:
@@ -339,17 +336,21 @@ def _open_pool(posterior, search_posterior, processes: int) -> _ProcessPool | No
     # Each worker is one of `processes` on a small machine: one BLAS/OpenMP thread each, or
     # they fight over the cores. The executor spawns its workers lazily, so the variables stay
     # set until the pool is closed.
-    saved = {key: os.environ.get(key) for key in SINGLE_THREAD_ENV}
-    os.environ.update(SINGLE_THREAD_ENV)
+    single_threaded = contextlib.ExitStack()
+    single_threaded.enter_context(environment(SINGLE_THREAD_ENV))
     # spawn, not fork: the parent may hold threads (tqdm, Dask, Open3D) that fork would copy
     # in a locked state.
-    executor = ProcessPoolExecutor(
-        processes,
-        mp_context=multiprocessing.get_context("spawn"),
-        initializer=_install_worker,
-        initargs=(posterior, search_posterior),
-    )
-    return _ProcessPool(executor, processes, saved)
+    try:
+        executor = ProcessPoolExecutor(
+            processes,
+            mp_context=multiprocessing.get_context("spawn"),
+            initializer=_install_worker,
+            initargs=(posterior, search_posterior),
+        )
+    except BaseException:
+        single_threaded.close()
+        raise
+    return _ProcessPool(executor, processes, single_threaded)
 
 
 # -- initialisation -----------------------------------------------------------------------
