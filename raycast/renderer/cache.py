@@ -690,7 +690,7 @@ def _build_pose(scene, directions, element_sizes_m, normal_step_rad, normal_quan
         keep = ~drop
         for key in el:  # one array at a time, each let go as its copy is made
             el[key] = el[key][keep]
-        of_element = of_element[~drop]
+        of_element = of_element[keep]
         of_element[el["exposed"]] = -1
         el["column"] = of_element
     else:
@@ -779,7 +779,7 @@ def _build_pose(scene, directions, element_sizes_m, normal_step_rad, normal_quan
         words = _cache_kernels.pack_words(_unpacked(visibility[row_of[columns]], len(directions)).astype(bool) & above)
         raw_bits[:, begin // 64 : begin // 64 + words.shape[1]] = words
     del visibility  # the element-major copy: the bits and factors hold what the run time needs
-    raw_corners = el_corners[raw_columns] if len(raw_columns) else np.zeros((0, 3, 3), np.float32)
+    raw_corners = el_corners[raw_columns]
     gap_ptr, gap_word, gap_mask, gap_rays = _horizon_gaps(mesh, raw_corners, raw_geo, raw_bits, directions, band)
     return _Pose(
         normal_shade.astype(np.float32),
@@ -1180,7 +1180,7 @@ def _hopeless(worst, budget, largest_rank):
 
 
 def _orthonormal(sketch):
-    """Q of the (e, k) float32 sketch's thin QR, in 32 bits, overwriting the sketch.
+    """Q of the (e, k) float32 sketch's thin QR, in 32 bits (the sketch may be overwritten).
 
     Q's columns are orthonormal to ~1e-6, far inside the budget (1e-3 of a group's area);
     numpy's QR computes in 64 bits, and its copies of a large group's sketch were the build's
