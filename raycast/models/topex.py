@@ -76,30 +76,41 @@ SURFACE_PARAMETERS = {
     ),
     "bus_albedo": SurfaceParameter(
         0.4,
-        0.1,
-        0.8,
-        "bus (MLI blankets, aluminium instrument module): diffuse albedo",
-        "MLI and aluminium panels span 0.1-0.8 (Rodriguez et al., AMOS 2007; Willison & Bedard, AMOS)",
+        0.02,
+        0.9,
+        "bus (MLI blankets, aluminium instrument module): base colour, the diffuse albedo of its "
+        "dielectric part and the reflectance of its metallic part",
+        "from black Kapton (about 0.05) to white paint and bare aluminium (0.8-0.9): MLI and aluminium "
+        "panels, Rodriguez et al., AMOS 2007; Willison & Bedard, AMOS",
     ),
-    "bus_specular": SurfaceParameter(
-        0.5,
+    "bus_metallic": SurfaceParameter(
+        0.0,
         0.0,
         1.0,
-        "bus: Specular IOR Level of its glossy term (F0 = 0.08 x level)",
-        "MLI foil and the instrument module's louvers are glossy (JPL, instrument module page)",
+        "bus: metallic fraction, the share of its area that reflects like a metal (aluminised MLI foil), "
+        "a conductor lobe in place of the diffuse layer",
+        "MLI outer layers are often aluminised or foil, the instrument module's louvers bare metal "
+        "(JPL, instrument module page); the share on TOPEX is not published, hence 0-1",
+    ),
+    "bus_roughness": SurfaceParameter(
+        0.35,
+        0.1,
+        0.8,
+        "bus: roughness of its glossy lobes (alpha = roughness^2); wrinkled MLI spreads the glint",
+        "crinkled MLI reflects in a lobe tens of degrees wide (Rodriguez et al., AMOS 2007)",
     ),
     "back_albedo": SurfaceParameter(
         0.5,
-        0.1,
+        0.05,
         0.8,
         "solar-array back: diffuse albedo",
-        "Kapton array substrate, diffuse 0.67 (Space Solar Power Review 1(3), 1980)",
+        "Kapton array substrate, diffuse 0.67 new (Space Solar Power Review 1(3), 1980), darker with age",
     ),
 }
-# Fixed parts of the surface classes (not fitted): the cells' dark diffuse layer, the roughness
-# of the bus's glossy term, and the antennas' white paint.
+# Fixed parts of the surface classes (not fitted): the cells' dark diffuse layer, the dielectric
+# specular level of the bus, and the antennas' white paint.
 CELLS_DIFFUSE = 0.05
-BUS_ROUGHNESS = 0.35
+BUS_SPECULAR = 0.5
 ANTENNA_ALBEDO = 0.7
 
 
@@ -128,7 +139,12 @@ def surface_brdfs(**values) -> dict:
         "solar_cells": Principled(
             base_color=CELLS_DIFFUSE, roughness=p["cells_roughness"], specular_ior_level=p["cells_specular"]
         ),
-        "bus": Principled(base_color=p["bus_albedo"], roughness=BUS_ROUGHNESS, specular_ior_level=p["bus_specular"]),
+        "bus": Principled(
+            base_color=p["bus_albedo"],
+            metallic=p["bus_metallic"],
+            roughness=p["bus_roughness"],
+            specular_ior_level=BUS_SPECULAR,
+        ),
         "array_back": Lambertian(albedo=p["back_albedo"]),
         "antenna": Lambertian(albedo=ANTENNA_ALBEDO),
         "boom": Lambertian(albedo=ANTENNA_ALBEDO),

@@ -147,14 +147,16 @@ def _check_parameter_spec(name: str, spec) -> None:
     except ValueError as error:
         raise ValueError(f"[parameters] {error}") from None
     if isinstance(spec, bool) or not isinstance(spec, (int, float, Mapping)):
-        raise ValueError(f"[parameters] {name} = {spec!r} must be a number (fixed) or a table (prior)")
+        raise ValueError(
+            f"[parameters] {name} = {spec!r} must be a number (fixed) or a table (prior; {{}} for its default prior)"
+        )
     if isinstance(spec, (int, float)) and not math.isfinite(spec):
         raise ValueError(f"[parameters] {name} = {spec!r} must be a finite number")
     if isinstance(spec, Mapping) and "from" in spec:
         if spec["from"] != "periods" or name != "spin_period_s":
             raise ValueError(f'[parameters] {name}: only spin_period_s can take its prior from = "periods"')
         _check_keys(f"parameters.{name}", spec, tuple(PERIODS_PRIOR))
-    elif isinstance(spec, Mapping):
+    elif isinstance(spec, Mapping) and spec:
         prior = prior_from_dict(spec, name)
         Parameter(name, prior)  # checks wrap windows of angles
 
@@ -263,32 +265,33 @@ class FitConfig:
         """A copy with ``[model]`` keys changed (e.g. ``mesh=``, ``spin_axis=``)."""
         return replace(self, model=replace(self.model, **changes))
 
-    def parameter_specs(self, shape_articulations: Mapping[str, float]) -> dict[str, Any]:
+    def parameter_specs(self, shape_parameters: Mapping[str, float]) -> dict[str, Any]:
         """Every parameter's spec (defaults overlaid with the configured ones), model order."""
         specs: dict[str, Any] = {}
         for name in ATTITUDES[self.model.attitude].parameters:
             specs[name] = dict(PERIODS_PRIOR) if name == "spin_period_s" else "default"
-        specs.update(shape_articulations)
+        specs.update(shape_parameters)
         if self.likelihood.kind == "gaussian":
             specs["jitter_mag"] = DEFAULT_JITTER_PRIOR.to_dict()
         specs.update(self.parameters)
         return specs
 
-    def parameter_space(self, shape_articulations: Mapping[str, float], periods=None) -> ParameterSpace:
+    def parameter_space(self, shape_parameters: Mapping[str, float], periods=None) -> ParameterSpace:
         """Resolve the specs into a `ParameterSpace`.
 
         Parameters
         ----------
-        shape_articulations : mapping of str to float
-            The shape's articulation parameters with their default values.
+        shape_parameters : mapping of str to float
+            The shape's articulation and surface parameters with their default values (fixed
+            unless the configuration frees them).
         periods : rsodb.periods.PeriodResult or None
             The stored period, needed when spin_period_s takes its prior from it.
         """
         free, fixed = [], {}
-        for name, spec in self.parameter_specs(shape_articulations).items():
+        for name, spec in self.parameter_specs(shape_parameters).items():
             if isinstance(spec, (int, float)):
                 fixed[name] = float(spec)
-            elif spec == "default":
+            elif spec == "default" or not spec:  # {} in a configuration: free, with its default prior
                 free.append(Parameter.default(name))
             elif "from" in spec:
                 free.append(Parameter(name, _period_prior(spec, periods)))

@@ -20,6 +20,7 @@ from types import MappingProxyType
 
 import numpy as np
 
+from raycast.models import topex
 from rsodb.fit.priors import Prior, Uniform, prior_from_dict
 
 __all__ = ["Parameter", "ParameterSpace", "KNOWN", "Known", "describe"]
@@ -104,6 +105,11 @@ KNOWN: Mapping[str, Known] = MappingProxyType(
             Uniform(-1.0, 1.0),
             "change of the spin period per day between the passes of a joint fit (rsodb.fit.joint)",
         ),
+        # The TOPEX model's surface classes, with the prior ranges docs/models.md gives sources for.
+        **{
+            name: Known(name, "", None, Uniform(spec.low, spec.high), f"TOPEX model: {spec.meaning}")
+            for name, spec in topex.SURFACE_PARAMETERS.items()
+        },
     }
 )
 

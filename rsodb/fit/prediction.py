@@ -118,9 +118,11 @@ def predict_fit(archive, pass_id: str, name: str | None = None, *, draws: int = 
             f"fit {name!r} of {observed.pass_id} has parameters {list(result.names)} but its configuration now "
             f"gives {list(problem.posterior.space.names)}; refit the pass"
         )
-    # The stored fit's own space (its priors as they were) reads its stored draws.
+    # The stored fit's own space (its priors as they were) reads its stored draws; parameters the
+    # model has gained since (fixed at their defaults) come from the configuration's space.
     posterior = problem.posterior
-    problem = replace(problem, posterior=Posterior(result.space, posterior.model, posterior.likelihood))
+    space = replace(result.space, fixed={**posterior.space.fixed, **result.space.fixed})
+    problem = replace(problem, posterior=Posterior(space, posterior.model, posterior.likelihood))
     rng = np.random.default_rng(seed)
     count = min(int(draws), result.samples.shape[0])
     picked = result.samples[rng.choice(result.samples.shape[0], size=count, replace=False)]
@@ -129,8 +131,8 @@ def predict_fit(archive, pass_id: str, name: str | None = None, *, draws: int = 
         observed,
         problem.selection,
         np.array(result.median, dtype=float),
-        result.space.wrap(picked),
+        space.wrap(picked),
         n_sub=problem.curve_n_sub(),
-        fastest_period_s=spin_period_bounds(result.space)[0],
+        fastest_period_s=spin_period_bounds(space)[0],
     )
     return FitPrediction(result, result.values("median"), samples, curve, count, problem)

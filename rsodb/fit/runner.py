@@ -134,10 +134,14 @@ class FitProblem:
         """
         pass_id = getattr(observed, "pass_id", "") or observed.source_name
         shape_name, shape_spec = shape or resolve_shape(config.model, observed.norad)
-        space = config.parameter_space(shape_spec.articulations, periods)
+        # The shape's surface parameters are fixed at their defaults unless freed, except in a fit
+        # that rescales every material instead (albedo_scale, roughness).
+        scalars = any(name in config.parameters for name in MATERIAL_PARAMETERS)
+        surfaces = {} if scalars else shape_spec.surface_defaults
+        space = config.parameter_space({**shape_spec.articulations, **surfaces}, periods)
         bounds = spin_period_bounds(space)
         selection = select_samples(observed, config.data, bounds, pass_id)
-        brightness_names = set(shape_spec.articulations) | set(MATERIAL_PARAMETERS)
+        brightness_names = set(shape_spec.articulations) | set(MATERIAL_PARAMETERS) | set(shape_spec.surfaces)
         free_bounds = {p.name: p.prior.bounds for p in space.free if p.name in brightness_names}
         fixed = {k: v for k, v in space.fixed.items() if k in brightness_names}
         brightness, brightness_parameters = brightness_for(

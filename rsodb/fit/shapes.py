@@ -15,6 +15,10 @@ forward model calls at every step, ``intensity(sun_body, obs_body, **parameters)
 ``renderer="direct"``
     `raycast.renderer.direct.DirectRenderer`: the slow reference, for checks.
 
+A model's surface parameters (`Shape.surfaces`, e.g. TOPEX's ``bus_metallic``) work the same way:
+`SurfaceClasses` builds the materials from them at each call (``Shape.surface_brdfs``), and the
+cache is built with every free roughness at the smoothest value its prior allows.
+
 Material scalars (``albedo_scale``, ``roughness``) are not parameters of the cache: the cache
 holds geometry and visibility, and evaluates each material's BRDF at run time. `MaterialScalars`
 therefore swaps the scene's BRDFs for rescaled copies (``Scene.with_brdfs``) before each call,
@@ -30,7 +34,7 @@ mesh file (``[model] mesh``, see configs/cosmos2502_paper.toml).
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 import functools
 import math
 from pathlib import Path
@@ -54,6 +58,7 @@ __all__ = [
     "AUTO_SHAPES",
     "MATERIAL_PARAMETERS",
     "MaterialScalars",
+    "SurfaceClasses",
     "brightness_for",
     "mesh_shape",
     "resolve_shape",
@@ -80,12 +85,25 @@ class Shape:
     analytic : bool
         True for closed-form convex bodies, which need no renderer.
     description : str
+    surfaces : mapping of str to SurfaceParameter
+        The model's surface-class parameters (default, prior range, meaning, source; e.g.
+        `raycast.models.topex.SURFACE_PARAMETERS`), fixed at their defaults unless a fit frees them.
+    surface_brdfs : callable, optional
+        ``surface_brdfs(**values) -> {material: BRDF}`` for those parameters (a module-level
+        function, so shapes pickle).
     """
 
     build: Callable
     articulations: Mapping[str, float]
     analytic: bool
     description: str
+    surfaces: Mapping[str, Any] = field(default_factory=dict)
+    surface_brdfs: Callable | None = None
+
+    @property
+    def surface_defaults(self) -> dict[str, float]:
+        """Every surface parameter at its default value."""
+        return {name: float(spec.default) for name, spec in self.surfaces.items()}
 
 
 def _topex():
@@ -119,7 +137,10 @@ SHAPES: Mapping[str, Shape] = MappingProxyType(
             False,
             "TOPEX/Poseidon approximated by code from its published dimensions (raycast.models.topex): bus, "
             "instrument module, solar array (pitch 12 deg per the published fit), antennas; layout and "
-            "finishes are guesses within the published sizes",
+            "finishes are guesses within the published sizes; its surface classes are fit parameters "
+            "(raycast.models.topex.SURFACE_PARAMETERS)",
+            topex.SURFACE_PARAMETERS,
+            topex.surface_brdfs,
         ),
         "cosmos2502": Shape(
             _cosmos2502,
@@ -304,6 +325,48 @@ class MaterialScalars:
         return renderer.intensity(sun_body, obs_body, **articulation)
 
 
+@dataclass(frozen=True, eq=False)
+class SurfaceClasses:
+    """A renderer whose scene's materials come from a model's surface parameters at each call.
+
+    Parameters
+    ----------
+    renderer : SceneCache or DirectRenderer
+        Anything with ``scene`` and ``intensity(sun_body, obs_body, **articulation)``.
+    surface_brdfs : callable
+        ``surface_brdfs(**values) -> {material: BRDF}`` (`Shape.surface_brdfs`).
+    surfaces : mapping of str to SurfaceParameter
+        The parameters and their ranges (`Shape.surfaces`).
+    """
+
+    renderer: Any
+    surface_brdfs: Callable
+    surfaces: Mapping[str, Any]
+
+    def supports(self, values: Mapping[str, float]) -> bool:
+        """False where a surface parameter leaves its physical range."""
+        return all(spec.low <= values.get(name, spec.default) <= spec.high for name, spec in self.surfaces.items())
+
+    def intensity(self, sun_body, obs_body, **parameters):
+        surface = {name: parameters.pop(name) for name in self.surfaces if name in parameters}
+        renderer = replace(self.renderer, scene=self.renderer.scene.with_brdfs(**self.surface_brdfs(**surface)))
+        return renderer.intensity(sun_body, obs_body, **parameters)
+
+
+def _sharpest_surfaces(shape: Shape, free_bounds: Mapping, fixed: Mapping) -> dict[str, float]:
+    """Surface values for building a cache: fixed ones as given, free roughnesses at the smoothest
+    their prior allows (the narrowest lobe sets the glint sampling), the rest at their defaults."""
+    values = {}
+    for name, spec in shape.surfaces.items():
+        if name in fixed:
+            values[name] = float(fixed[name])
+        elif name in free_bounds and name.endswith("roughness"):
+            values[name] = max(float(free_bounds[name][0]), spec.low)
+        else:
+            values[name] = float(spec.default)
+    return values
+
+
 def _build_cache(scene, grid: tuple, smoothest_roughness: float | None, accuracy_mag: float, progress: bool):
     options = {}
     if smoothest_roughness is not None:
@@ -345,7 +408,8 @@ def brightness_for(
     shape : Shape
         A value of `SHAPES`, or `mesh_shape(...)`.
     free_bounds : mapping of str to (low, high)
-        Prior ranges of the free brightness parameters (articulations, material scalars).
+        Prior ranges of the free brightness parameters (articulations, material scalars, surface
+        parameters).
     fixed : mapping of str to float
         Values of the fixed brightness parameters.
     renderer : {"cached", "direct"}
@@ -368,12 +432,18 @@ def brightness_for(
         parameters the forward model must pass to it (every articulation of the shape, free
         or fixed, and the material scalars in use).
     """
-    allowed = set(shape.articulations) | set(MATERIAL_PARAMETERS)
+    allowed = set(shape.articulations) | set(MATERIAL_PARAMETERS) | set(shape.surfaces)
     names = set(free_bounds) | set(fixed)
     unknown = sorted(names - allowed)
     if unknown:
         raise ValueError(f"shape {name!r} has no parameters {unknown}; it has {', '.join(sorted(allowed))}")
     materials = tuple(n for n in MATERIAL_PARAMETERS if n in names)
+    surfaces = tuple(n for n in shape.surfaces if n in names)
+    if materials and surfaces:
+        raise ValueError(
+            f"shape {name!r}: give either the material scalars {list(materials)} or its surface parameters "
+            f"{list(surfaces)}, not both (the surface parameters set every material)"
+        )
     articulation_free = {n: b for n, b in free_bounds.items() if n in shape.articulations}
     articulation_fixed = {
         n: float(fixed.get(n, default)) for n, default in shape.articulations.items() if n not in articulation_free
@@ -385,6 +455,8 @@ def brightness_for(
     scene = shape.build()
     if articulation_fixed:
         scene = scene.with_parameters(**articulation_fixed)
+    if surfaces:
+        scene = scene.with_brdfs(**shape.surface_brdfs(**_sharpest_surfaces(shape, free_bounds, fixed)))
     if renderer == "cached":
         grid = tuple(
             (n, tuple(np.linspace(low, high, max(3, int(math.ceil((high - low) * _GRID_PER_DEG)) + 1))))
@@ -404,7 +476,9 @@ def brightness_for(
     else:
         raise ValueError(f"renderer={renderer!r} must be 'cached' or 'direct'")
     # Fixed articulations are passed too (the cache checks them against the scene it was built for).
-    parameters = tuple(sorted(shape.articulations)) + materials
+    parameters = tuple(sorted(shape.articulations)) + materials + surfaces
     if materials:
         return MaterialScalars(base, materials), parameters
+    if surfaces:
+        return SurfaceClasses(base, shape.surface_brdfs, {n: shape.surfaces[n] for n in surfaces}), parameters
     return base, parameters
