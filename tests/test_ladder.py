@@ -58,6 +58,24 @@ def test_symmetric_shapes_double_the_period_prior_and_fit_the_first_part():
     assert topex.parameters["spin_period_s"]["width"] == 0.03
 
 
+def test_a_rung_frees_surface_parameters_with_walkers_and_time_to_match():
+    base = FitConfig.from_dict({"sampler": {"n_walkers": 16, "time_limit_s": 240}})
+    record = {
+        "shape": "topex",
+        "attitude": "inertial",
+        "parameters": {name: {} for name in ("bus_albedo", "bus_metallic", "bus_roughness")},
+        "sampler": {"time_limit_s": 900},
+    }
+    rung = Rung.from_dict(record).config(base, "lad", 120.0)
+    # 4 attitude parameters, 3 surface parameters and the jitter: more than twice 8 walkers.
+    assert rung.sampler.n_walkers == 18 and rung.sampler.time_limit_s == 900
+    assert rung.parameters["bus_metallic"] == {}
+    plain = Rung("topex", "inertial").config(base, "lad", 120.0)
+    assert plain.sampler.n_walkers == 16 and plain.sampler.time_limit_s == 240
+    with pytest.raises(ValueError, match=r"optional parameters, sampler"):
+        Rung.from_dict({"shape": "topex", "attitude": "inertial", "walkers": 3})
+
+
 def test_the_simplest_rung_within_the_margin_is_chosen():
     rng = np.random.default_rng(0)
     noise = rng.normal(0.0, 0.5, 400)

@@ -58,12 +58,15 @@ MIN_BLOCKS = 10
 class Rung:
     """One model of the ladder: a shape (a `rsodb.fit.shapes.SHAPES` name) and an attitude family.
 
-    ``parameters`` overlay the base configuration's (e.g. a wider spin-period prior).
+    ``parameters`` overlay the base configuration's (e.g. a wider spin-period prior, or a model's
+    surface parameters freed with ``{}``); ``sampler`` overlays its sampler settings (e.g. a longer
+    ``time_limit_s`` for a rung with more parameters).
     """
 
     shape: str
     attitude: str
     parameters: Mapping[str, Any] = field(default_factory=dict)
+    sampler: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self):
         if self.shape not in SHAPES:
@@ -71,13 +74,18 @@ class Rung:
         if self.attitude not in ATTITUDES:
             raise ValueError(f"ladder rung attitude={self.attitude!r} is not one of {', '.join(ATTITUDES)}")
         object.__setattr__(self, "parameters", MappingProxyType(dict(self.parameters)))
+        object.__setattr__(self, "sampler", MappingProxyType(dict(self.sampler)))
 
     @classmethod
     def from_dict(cls, record: Mapping) -> Rung:
-        unknown = sorted(set(record) - {"shape", "attitude", "parameters"})
+        unknown = sorted(set(record) - {"shape", "attitude", "parameters", "sampler"})
         if unknown or "shape" not in record or "attitude" not in record:
-            raise ValueError(f"a ladder rung needs shape and attitude (optional parameters); got {dict(record)!r}")
-        return cls(record["shape"], record["attitude"], dict(record.get("parameters", {})))
+            raise ValueError(
+                f"a ladder rung needs shape and attitude (optional parameters, sampler); got {dict(record)!r}"
+            )
+        return cls(
+            record["shape"], record["attitude"], dict(record.get("parameters", {})), dict(record.get("sampler", {}))
+        )
 
     @property
     def name(self) -> str:
@@ -98,8 +106,11 @@ class Rung:
         )
         record["data"] = dict(record["data"], start_s=0.0, duration_s=float(duration_s))
         # emcee's stretch move needs more than twice as many walkers as free parameters (+ jitter).
-        walkers = 2 * (len(ATTITUDES[self.attitude].parameters) + 1) + 2
-        record["sampler"] = dict(record["sampler"], n_walkers=max(base.sampler.n_walkers, walkers))
+        attitude = ATTITUDES[self.attitude].parameters
+        shape_free = [n for n, spec in parameters.items() if isinstance(spec, Mapping) and n not in attitude]
+        walkers = 2 * (len(attitude) + len(set(shape_free) | {"jitter_mag"})) + 2
+        sampler = dict(record["sampler"], **self.sampler)
+        record["sampler"] = dict(sampler, n_walkers=max(int(sampler["n_walkers"]), walkers))
         return FitConfig.from_dict(record)
 
 
