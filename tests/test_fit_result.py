@@ -138,6 +138,26 @@ def test_plots_are_written(fitted, tmp_path):
     assert len(figure.axes) == len(result.names) ** 2
 
 
+def test_the_folded_figure_shows_each_stretch_and_its_misfit(fitted, tmp_path):
+    from rsodb.fit.plots import fold_period_s, folded_figure
+
+    _, _, _, result = fitted
+    light_curve = result.spin_periods["conventions"]["light_curve"]["median"]
+    assert fold_period_s(result) == light_curve
+    figure = folded_figure(result, tmp_path / "folded.png", windows=2)
+    assert (tmp_path / "folded.png").stat().st_size > 10_000
+    shown = [axis for axis in figure.axes if axis.get_visible()]
+    assert len(shown) == 2
+    # The second stretch's title gives the RMS of its own residuals.
+    t = result.t_s[result.in_window]
+    late = result.in_window & (result.t_s >= 0.5 * (t[0] + t[-1]))
+    rms = np.sqrt(np.mean((result.mag_obs[late] - result.mag_model[late]) ** 2))
+    assert shown[1].get_title().endswith(f"RMS {rms:.2f} mag")
+    # One model line per cycle in each stretch, drawn from the stored continuous curve.
+    cycles = np.unique(np.floor(((result.curve.time_utc - result.time_utc[0]) / np.timedelta64(1, "s")) / light_curve))
+    assert sum(len(axis.lines) - 2 for axis in shown) >= len(cycles)
+
+
 @pytest.mark.slow
 def test_misspecified_model_reports_its_misfit(tmp_path):
     # Data rendered from the detailed TOPEX model (cached renderer), fitted with the ellipsoid.

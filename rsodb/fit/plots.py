@@ -18,7 +18,11 @@ import numpy as np
 from rsodb.fit.likelihood import NormalisedLikelihood
 from rsodb.fit.sampler import read_chain
 
-__all__ = ["corner_figure", "lightcurve_figure", "prediction_figure", "trace_figure", "save_all"]
+__all__ = ["corner_figure", "lightcurve_figure", "folded_figure", "prediction_figure", "trace_figure", "save_all"]
+
+# A pass of at least this many light-curve cycles also gets the folded figure: the whole-pass
+# plot cannot show the shape of one cycle when dozens are side by side.
+FOLD_MIN_CYCLES = 8
 
 
 def _figure(width_in: float, height_in: float, layout: str | None = "constrained"):
@@ -192,6 +196,73 @@ def lightcurve_figure(result, path=None, mag_label: str = "magnitude"):
     return _saved(figure, path)
 
 
+def fold_period_s(result) -> float | None:
+    """The period to fold a fit's pass at: its light-curve period (posterior median), else the
+    fitted spin period; None when the fit has neither."""
+    conventions = dict(result.spin_periods).get("conventions", {})
+    if "light_curve" in conventions:
+        return float(conventions["light_curve"]["median"])
+    if "spin_period_s" in result.names:
+        return float(result.values("median")["spin_period_s"])
+    return None
+
+
+def folded_figure(result, path=None, period_s: float | None = None, windows: int = 6, mag_label: str = "magnitude"):
+    """Observed and model folded at one period in consecutive stretches of the pass.
+
+    Each panel holds every sample of one stretch (the likelihood's filled, the others hollow)
+    and the stored model curve of that stretch, one line per cycle, so that how the light curve
+    and the misfit change over the pass can be read at a glance. The phase is counted from the
+    pass's first sample. Returns None when no period is known (`fold_period_s`).
+    """
+    period_s = period_s or fold_period_s(result)
+    if not period_s or not np.isfinite(period_s) or period_s <= 0:
+        return None
+    window = result.in_window
+    start = result.time_utc[0]
+    t = result.t_s
+    edges = np.linspace(t[window][0], t[window][-1], windows + 1)
+    columns = min(3, windows)
+    rows = -(-windows // columns)
+    figure = _figure(4.2 * columns, 3.2 * rows)
+    axes = np.atleast_1d(figure.subplots(rows, columns, sharex=True, sharey=True)).ravel()
+    curve = result.curve
+    ct = None if curve is None else (curve.time_utc - start) / np.timedelta64(1, "s")
+    for k, axis in enumerate(axes):
+        if k >= windows:
+            axis.set_visible(False)
+            continue
+        low, high = edges[k], edges[k + 1]
+        inside = window & (t >= low) & ((t < high) | (k == windows - 1))
+        fitted = inside & result.fitted
+        phase = (t / period_s) % 1.0
+        if ct is not None:
+            stretch = (ct >= low) & (ct <= high)
+            cycle = np.floor(ct[stretch] / period_s)
+            model_phase = (ct[stretch] / period_s) % 1.0
+            mag = curve.mag_best[stretch]
+            # One line per cycle: break where the phase wraps.
+            for c in np.unique(cycle):
+                one = cycle == c
+                axis.plot(model_phase[one], mag[one], "-", lw=0.6, color="C3", alpha=0.6)
+        axis.plot(phase[fitted], result.mag_obs[fitted], ".", ms=2.5, color="0.15")
+        axis.plot(phase[inside & ~fitted], result.mag_obs[inside & ~fitted], "o", ms=2, mfc="none", mec="0.4", mew=0.4)
+        residual = result.mag_obs[inside] - result.mag_model[inside]
+        rms = float(np.sqrt(np.nanmean(residual**2))) if residual.size else float("nan")
+        axis.set_title(f"{low:.0f}-{high:.0f} s: RMS {rms:.2f} mag", fontsize=9)
+        if k % columns == 0:
+            axis.set_ylabel(mag_label)
+        if k >= windows - columns:
+            axis.set_xlabel(f"phase at {period_s:.5g} s")
+    axes[0].invert_yaxis()
+    figure.suptitle(
+        f"{result.pass_id} fit {result.name!r}: observed (black; hollow: not in the likelihood) and best "
+        f"fit (red, one line per cycle), folded",
+        fontsize=10,
+    )
+    return _saved(figure, path)
+
+
 def prediction_figure(prediction, path=None, mag_label: str = "magnitude"):
     """A stored fit replayed (`rsodb.fit.prediction.FitPrediction`): the posterior median over the
     whole pass with the band of its posterior draws, and every sample's residual."""
@@ -245,7 +316,8 @@ def trace_figure(result, chain=None, path=None):
 
 
 def save_all(result, directory, stem: str | None = None, truths=None) -> dict[str, Path]:
-    """Save the three figures as ``<stem>_corner.png``, ``_lightcurve.png``, ``_trace.png``."""
+    """Save the figures as ``<stem>_corner.png``, ``_lightcurve.png``, ``_trace.png`` and, for a
+    pass of at least `FOLD_MIN_CYCLES` cycles, ``_folded.png``."""
     directory = Path(directory)
     stem = stem or f"{result.pass_id}_{result.name}"
     paths = {
@@ -255,6 +327,11 @@ def save_all(result, directory, stem: str | None = None, truths=None) -> dict[st
     }
     corner_figure(result, paths["corner"], truths)
     lightcurve_figure(result, paths["lightcurve"])
+    period_s = fold_period_s(result)
+    window = result.t_s[result.in_window]
+    if period_s and window.size and (window[-1] - window[0]) >= FOLD_MIN_CYCLES * period_s:
+        paths["folded"] = directory / f"{stem}_folded.png"
+        folded_figure(result, paths["folded"], period_s)
     if Path(result.chain_path).exists():
         trace_figure(result, path=paths["trace"])
     else:
