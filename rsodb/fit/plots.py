@@ -18,7 +18,15 @@ import numpy as np
 from rsodb.fit.likelihood import NormalisedLikelihood
 from rsodb.fit.sampler import read_chain
 
-__all__ = ["corner_figure", "lightcurve_figure", "folded_figure", "prediction_figure", "trace_figure", "save_all"]
+__all__ = [
+    "corner_figure",
+    "lightcurve_figure",
+    "folded_figure",
+    "fold_worth",
+    "prediction_figure",
+    "trace_figure",
+    "save_all",
+]
 
 # A pass of at least this many light-curve cycles also gets the folded figure: the whole-pass
 # plot cannot show the shape of one cycle when dozens are side by side.
@@ -207,6 +215,15 @@ def fold_period_s(result) -> float | None:
     return None
 
 
+def fold_worth(result) -> float | None:
+    """The fold period when the fitted window spans at least `FOLD_MIN_CYCLES` of it, else None."""
+    period_s = fold_period_s(result)
+    window = result.t_s[result.in_window]
+    if period_s and window.size and (window[-1] - window[0]) >= FOLD_MIN_CYCLES * period_s:
+        return period_s
+    return None
+
+
 def folded_figure(result, path=None, period_s: float | None = None, windows: int = 6, mag_label: str = "magnitude"):
     """Observed and model folded at one period in consecutive stretches of the pass.
 
@@ -327,9 +344,8 @@ def save_all(result, directory, stem: str | None = None, truths=None) -> dict[st
     }
     corner_figure(result, paths["corner"], truths)
     lightcurve_figure(result, paths["lightcurve"])
-    period_s = fold_period_s(result)
-    window = result.t_s[result.in_window]
-    if period_s and window.size and (window[-1] - window[0]) >= FOLD_MIN_CYCLES * period_s:
+    period_s = fold_worth(result)
+    if period_s:
         paths["folded"] = directory / f"{stem}_folded.png"
         folded_figure(result, paths["folded"], period_s)
     if Path(result.chain_path).exists():

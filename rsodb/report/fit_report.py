@@ -10,7 +10,7 @@ import math
 import numpy as np
 
 from rsodb.campaign.period_survey import load_period_results
-from rsodb.fit.plots import corner_figure, lightcurve_figure, trace_figure
+from rsodb.fit.plots import corner_figure, fold_worth, folded_figure, lightcurve_figure, trace_figure
 from rsodb.fit.result import FitResult
 from rsodb.periods.lightcurve import LightCurve
 from rsodb.plotting import magnitude_label
@@ -294,6 +294,15 @@ def _pass_section(archive, fit, period) -> list:
             "draws, the fitted window shaded, and the residual of every sample.",
         )
     )
+    period_s = fold_worth(fit)
+    if period_s:
+        blocks.append(
+            figure_from_matplotlib(
+                folded_figure(fit, period_s=period_s, mag_label=mag_label),
+                f"The pass folded at {period_s:.5g} s in consecutive stretches: the shape of each cycle and where "
+                "the model misses it, with each stretch's residual RMS.",
+            )
+        )
     blocks.append(
         figure_from_matplotlib(
             corner_figure(fit),

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from rsodb.fit.plots import lightcurve_figure
+from rsodb.fit.plots import fold_worth, folded_figure, lightcurve_figure
 from rsodb.fit.result import FitResult
 from rsodb.report.html import Document, Heading, Paragraph, Table, figure_from_matplotlib
 
@@ -105,6 +105,15 @@ def ladder_section(archive, ladder) -> list:
             f"{chosen.rung} over the whole pass: fitted up to {ladder.train_end_utc} UTC (shaded), held out after",
         )
     )
+    period_s = fold_worth(result)
+    if period_s:
+        blocks.append(
+            figure_from_matplotlib(
+                folded_figure(result, period_s=period_s),
+                f"{chosen.rung}, observed and best fit folded at {period_s:.5g} s in consecutive stretches of the "
+                "pass (the last ones held out), each with its residual RMS",
+            )
+        )
     return blocks
 
 
