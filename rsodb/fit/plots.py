@@ -224,21 +224,30 @@ def fold_worth(result) -> float | None:
     return None
 
 
-def folded_figure(result, path=None, period_s: float | None = None, windows: int = 6, mag_label: str = "magnitude"):
+def folded_figure(
+    result,
+    path=None,
+    period_s: float | None = None,
+    windows: int = 6,
+    mag_label: str = "magnitude",
+    whole_pass: bool = False,
+):
     """Observed and model folded at one period in consecutive stretches of the pass.
 
-    Each panel holds every sample of one stretch (the likelihood's filled, the others hollow)
-    and the stored model curve of that stretch, one line per cycle, so that how the light curve
-    and the misfit change over the pass can be read at a glance. The phase is counted from the
+    Each panel holds every sample of one stretch (the likelihood's filled, the rest of the
+    fitted window hollow, with `whole_pass` the samples after or before the window in blue) and
+    the stored model curve of that stretch, one line per cycle, so that how the light curve and
+    the misfit change over the pass can be read at a glance. The phase is counted from the
     pass's first sample. Returns None when no period is known (`fold_period_s`).
     """
     period_s = period_s or fold_period_s(result)
     if not period_s or not np.isfinite(period_s) or period_s <= 0:
         return None
     window = result.in_window
+    shown = np.isfinite(result.mag_obs) if whole_pass else window
     start = result.time_utc[0]
     t = result.t_s
-    edges = np.linspace(t[window][0], t[window][-1], windows + 1)
+    edges = np.linspace(t[shown][0], t[shown][-1], windows + 1)
     columns = min(3, windows)
     rows = -(-windows // columns)
     figure = _figure(4.2 * columns, 3.2 * rows)
@@ -250,8 +259,9 @@ def folded_figure(result, path=None, period_s: float | None = None, windows: int
             axis.set_visible(False)
             continue
         low, high = edges[k], edges[k + 1]
-        inside = window & (t >= low) & ((t < high) | (k == windows - 1))
+        inside = shown & (t >= low) & ((t < high) | (k == windows - 1))
         fitted = inside & result.fitted
+        outside = inside & ~window
         phase = (t / period_s) % 1.0
         if ct is not None:
             stretch = (ct >= low) & (ct <= high)
@@ -263,18 +273,22 @@ def folded_figure(result, path=None, period_s: float | None = None, windows: int
                 one = cycle == c
                 axis.plot(model_phase[one], mag[one], "-", lw=0.6, color="C3", alpha=0.6)
         axis.plot(phase[fitted], result.mag_obs[fitted], ".", ms=2.5, color="0.15")
-        axis.plot(phase[inside & ~fitted], result.mag_obs[inside & ~fitted], "o", ms=2, mfc="none", mec="0.4", mew=0.4)
+        hollow = inside & window & ~fitted
+        axis.plot(phase[hollow], result.mag_obs[hollow], "o", ms=2, mfc="none", mec="0.4", mew=0.4)
+        axis.plot(phase[outside], result.mag_obs[outside], ".", ms=2.5, color="C0")
         residual = result.mag_obs[inside] - result.mag_model[inside]
         rms = float(np.sqrt(np.nanmean(residual**2))) if residual.size else float("nan")
-        axis.set_title(f"{low:.0f}-{high:.0f} s: RMS {rms:.2f} mag", fontsize=9)
+        held = " (outside the fit)" if outside.any() and not (inside & window).any() else ""
+        axis.set_title(f"{low:.0f}-{high:.0f} s{held}: RMS {rms:.2f} mag", fontsize=9)
         if k % columns == 0:
             axis.set_ylabel(mag_label)
         if k >= windows - columns:
             axis.set_xlabel(f"phase at {period_s:.5g} s")
     axes[0].invert_yaxis()
     figure.suptitle(
-        f"{result.pass_id} fit {result.name!r}: observed (black; hollow: not in the likelihood) and best "
-        f"fit (red, one line per cycle), folded",
+        f"{result.pass_id} fit {result.name!r}, folded\nobserved black (hollow: not in the likelihood"
+        + ("; blue: outside the fitted window" if whole_pass else "")
+        + "), best fit red (one line per cycle)",
         fontsize=10,
     )
     return _saved(figure, path)

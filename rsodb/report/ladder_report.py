@@ -109,7 +109,7 @@ def ladder_section(archive, ladder) -> list:
     if period_s:
         blocks.append(
             figure_from_matplotlib(
-                folded_figure(result, period_s=period_s),
+                folded_figure(result, period_s=period_s, whole_pass=True),
                 f"{chosen.rung}, observed and best fit folded at {period_s:.5g} s in consecutive stretches of the "
                 "pass (the last ones held out), each with its residual RMS",
             )
