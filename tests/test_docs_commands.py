@@ -41,7 +41,7 @@ SHORT_DATA = {"max_points": 40}
 # real TOPEX pass), and the examples' plots need a band, not a smooth one.
 SHORT_BAND_DRAWS = 4
 # Commands another test runs exactly as the docs show them, or that are too long for the suite
-# (the real-pass ladder is a 27-minute campaign; docs/real_passes.md records its run).
+# (the real-pass ladder is a 22-minute campaign; docs/real_passes.md records its run).
 COVERED = {
     "rsodb pipeline data_samples --archive archive --out reports": "tests/test_pipeline_samples.py",
     "rsodb ladder --archive archive --config configs/real_passes.toml --ingest ../shared/data/observations "
@@ -49,8 +49,8 @@ COVERED = {
     "rsodb ladder --archive archive --config configs/real_passes.toml --ingest ../shared/data/observations "
     "--report reports/real_passes.html": "docs/real_passes.md (27 min)",
 }
-# Files whose commands need the 27-minute real-pass campaign or a running Dask scheduler.
-RUN_BY_HAND = {"real_passes.md": "its commands continue the 27-minute real-pass campaign and use a Dask scheduler"}
+# Files whose commands need the 22-minute real-pass campaign or a running Dask scheduler.
+RUN_BY_HAND = {"real_passes.md": "its commands continue the 22-minute real-pass campaign and use a Dask scheduler"}
 SECONDS_PER_COMMAND = 600
 
 

@@ -21,6 +21,7 @@ from rsodb.report.trust import assess
 
 __all__ = [
     "build_campaign_report",
+    "folded_blocks",
     "load_fits",
     "parameters_figure",
     "period_figure",
@@ -294,15 +295,14 @@ def _pass_section(archive, fit, period) -> list:
             "draws, the fitted window shaded, and the residual of every sample.",
         )
     )
-    period_s = fold_worth(fit)
-    if period_s:
-        blocks.append(
-            figure_from_matplotlib(
-                folded_figure(fit, period_s=period_s, mag_label=mag_label),
-                f"The pass folded at {period_s:.5g} s in consecutive stretches: the shape of each cycle and where "
-                "the model misses it, with each stretch's residual RMS.",
-            )
+    blocks.extend(
+        folded_blocks(
+            fit,
+            "The pass folded at {period} s in consecutive stretches: the shape of each cycle and where the model "
+            "misses it, with each stretch's residual RMS.",
+            mag_label=mag_label,
         )
+    )
     blocks.append(
         figure_from_matplotlib(
             corner_figure(fit),
@@ -334,3 +334,13 @@ def _pass_section(archive, fit, period) -> list:
         )
     )
     return blocks
+
+
+def folded_blocks(fit, caption: str, mag_label: str = "magnitude", whole_pass: bool = False) -> list:
+    """The folded figure of a fit (`rsodb.fit.plots.folded_figure`) as a report block, when its
+    pass holds enough cycles for one (`fold_worth`); `caption` may name ``{period}``."""
+    period_s = fold_worth(fit)
+    if not period_s:
+        return []
+    figure = folded_figure(fit, period_s=period_s, mag_label=mag_label, whole_pass=whole_pass)
+    return [figure_from_matplotlib(figure, caption.format(period=f"{period_s:.5g}"))]

@@ -7,8 +7,9 @@ import math
 
 import numpy as np
 
-from rsodb.fit.plots import fold_worth, folded_figure, lightcurve_figure
+from rsodb.fit.plots import lightcurve_figure
 from rsodb.fit.result import FitResult
+from rsodb.report.fit_report import folded_blocks
 from rsodb.report.html import Document, Heading, Paragraph, Table, figure_from_matplotlib
 
 __all__ = ["build_ladder_report", "ladder_section", "scores_figure", "scores_table"]
@@ -105,15 +106,11 @@ def ladder_section(archive, ladder) -> list:
             f"{chosen.rung} over the whole pass: fitted up to {ladder.train_end_utc} UTC (shaded), held out after",
         )
     )
-    period_s = fold_worth(result)
-    if period_s:
-        blocks.append(
-            figure_from_matplotlib(
-                folded_figure(result, period_s=period_s, whole_pass=True),
-                f"{chosen.rung}, observed and best fit folded at {period_s:.5g} s in consecutive stretches of the "
-                "pass (the last ones held out), each with its residual RMS",
-            )
-        )
+    caption = (
+        f"{chosen.rung}, observed and best fit folded at {{period}} s in consecutive stretches of the pass "
+        "(the held-out samples in blue), each with its residual RMS"
+    )
+    blocks.extend(folded_blocks(result, caption, whole_pass=True))
     return blocks
 
 
