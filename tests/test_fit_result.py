@@ -215,3 +215,20 @@ def test_stored_draws_keep_every_walker():
     periods = result.samples[:, 0]
     assert periods.size <= MAX_STORED_SAMPLES
     assert np.sum(periods < 9.85) == np.sum(periods > 9.85) == periods.size // 2
+
+
+def test_the_folded_figure_of_a_whole_pass_marks_what_the_fit_did_not_see(fitted):
+    from rsodb.fit.plots import folded_figure
+
+    _, _, _, result = fitted
+    # As a ladder rung: fitted on the first 70% of the pass, the rest held out.
+    cut = result.t_s[0] + 0.7 * (result.t_s[-1] - result.t_s[0])
+    rung = replace(result, in_window=result.in_window & (result.t_s <= cut), fitted=result.fitted & (result.t_s <= cut))
+    figure = folded_figure(rung, windows=2, whole_pass=True)
+    late = [axis for axis in figure.axes if axis.get_visible()][1]
+    held = (result.t_s > cut) & np.isfinite(result.mag_obs)
+    blue = [line for line in late.lines if line.get_color() == "C0"]
+    assert len(blue) == 1 and len(blue[0].get_xdata()) == held.sum() > 0
+    # Without whole_pass the figure ends where the fit's window ends.
+    window_only = folded_figure(rung, windows=2)
+    assert all(line.get_color() != "C0" for axis in window_only.axes for line in axis.lines)

@@ -275,7 +275,8 @@ def folded_figure(
         axis.plot(phase[fitted], result.mag_obs[fitted], ".", ms=2.5, color="0.15")
         hollow = inside & window & ~fitted
         axis.plot(phase[hollow], result.mag_obs[hollow], "o", ms=2, mfc="none", mec="0.4", mew=0.4)
-        axis.plot(phase[outside], result.mag_obs[outside], ".", ms=2.5, color="C0")
+        if outside.any():
+            axis.plot(phase[outside], result.mag_obs[outside], ".", ms=2.5, color="C0")
         residual = result.mag_obs[inside] - result.mag_model[inside]
         rms = float(np.sqrt(np.nanmean(residual**2))) if residual.size else float("nan")
         held = " (outside the fit)" if outside.any() and not (inside & window).any() else ""
