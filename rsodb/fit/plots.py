@@ -254,6 +254,7 @@ def folded_figure(
     axes = np.atleast_1d(figure.subplots(rows, columns, sharex=True, sharey=True)).ravel()
     curve = result.curve
     ct = None if curve is None else (curve.time_utc - start) / np.timedelta64(1, "s")
+    phase = (t / period_s) % 1.0
     for k, axis in enumerate(axes):
         if k >= windows:
             axis.set_visible(False)
@@ -262,7 +263,6 @@ def folded_figure(
         inside = shown & (t >= low) & ((t < high) | (k == windows - 1))
         fitted = inside & result.fitted
         outside = inside & ~window
-        phase = (t / period_s) % 1.0
         if ct is not None:
             stretch = (ct >= low) & (ct <= high)
             cycle = np.floor(ct[stretch] / period_s)
