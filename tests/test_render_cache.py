@@ -206,6 +206,46 @@ def test_articulation_axis_interpolates_between_poses():
     assert rms_mag(cache.intensity(sun, obs, pitch_deg=12.0), node) < 0.01
 
 
+@pytest.mark.parametrize("m, threads", [(1, 2), (63, 2), (64, 2), (150, 2), (600, 3), (4640, 2), (300, 1)])
+def test_frame_batches_cover_the_frames_in_order(m, threads):
+    batches = cache_module._frame_batches(m, threads)
+    assert [b.start for b in batches[1:]] == [b.stop for b in batches[:-1]]  # contiguous, in order
+    assert batches[0].start == 0 and batches[-1].stop == m
+    sizes = [b.stop - b.start for b in batches]
+    assert max(sizes) <= cache_module._FRAMES_PER_CHUNK
+    # As many batches as threads where each gets enough frames; no more than the chunks need.
+    expected = max(-(-m // cache_module._FRAMES_PER_CHUNK), min(threads, m // cache_module._MIN_FRAMES_PER_THREAD), 1)
+    assert len(batches) == expected
+
+
+def test_threads_give_the_one_thread_light_curve(monkeypatch):
+    # 300 frames: three batches on two threads (two run together, their rays in one call).
+    scene = articulated_scene()
+    cache = SceneCache.build(scene, grid_size=16)
+    rng = np.random.default_rng(12)
+    sun = unit(rng.normal(size=(300, 3)) + [2.0, 0.0, 0.5])
+    obs = unit(rng.normal(size=(300, 3)) + [2.0, 0.0, 0.5])
+    monkeypatch.setattr(cache_module, "_threads", lambda: 1)
+    one = cache.intensity(sun, obs)
+    monkeypatch.setattr(cache_module, "_threads", lambda: 2)
+    monkeypatch.setattr(cache_module, "_FRAMES_PER_CHUNK", 128)
+    assert len(cache_module._frame_batches(300, 2)) == 3
+    np.testing.assert_array_equal(cache.intensity(sun, obs), one)
+    assert np.count_nonzero(one) > 250
+    origins = cache_module._ray_origins(cache.poses[0], cache_module._subpoint_weights(1))
+    assert len(cache_module._pairs_to_decide(cache.poses[0], sun, obs, 16, origins).rays) > 1000  # rays were merged
+
+
+def test_a_pool_worker_shades_with_one_thread(monkeypatch):
+    from rsodb.pool import SINGLE_THREAD_ENV
+
+    for key, value in SINGLE_THREAD_ENV.items():
+        monkeypatch.setenv(key, value)
+    assert cache_module._threads() == 1
+    monkeypatch.delenv("OMP_NUM_THREADS")
+    assert cache_module._threads() >= 1
+
+
 def test_articulation_errors_name_the_fix():
     scene = articulated_scene()
     single = SceneCache.build(scene, grid_size=8)

@@ -39,11 +39,14 @@ What is precomputed
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
+import contextlib
 import dataclasses
 from dataclasses import dataclass, field
 import functools
 import itertools
 import math
+import os
 import time
 import weakref
 
@@ -78,6 +81,9 @@ _WEAK_LOBE_SHARE = 0.2
 _STRIP_LOBE_DEG = 10.0
 # Frames per batch of the run time (bounds its buffers of pairs for exact rays and of lit classes).
 _FRAMES_PER_CHUNK = 256
+# A light curve is shaded in parallel batches of at least this many frames, one per thread
+# (the compiled loops release the GIL); see _threads.
+_MIN_FRAMES_PER_THREAD = 32
 # An element is cut in four where its quarters see differently in more than this fraction of
 # its upper-hemisphere directions (see _split_where_partly_visible).
 _SPLIT_FRACTION = 0.05
@@ -377,11 +383,26 @@ class SceneCache:
         return (1.0 - t) * low + t * high
 
     def _pose_intensity(self, pose, sun, obs):
+        """(m,) I/E: batches of frames in parallel threads (the compiled loops release the GIL),
+        with the exact rays of the batches running together in one call (Embree uses every core)."""
         total = np.zeros(len(sun))
-        for begin in range(0, len(sun), _FRAMES_PER_CHUNK):
-            sl = slice(begin, begin + _FRAMES_PER_CHUNK)
-            lit = _lit_classes(pose, sun[sl], obs[sl], self.grid_size, _subpoint_weights(self.edge_rays_per_side))
+        origins = _ray_origins(pose, _subpoint_weights(self.edge_rays_per_side))
+
+        def pairs_of(sl):
+            return _pairs_to_decide(pose, sun[sl], obs[sl], self.grid_size, origins)
+
+        def shade(sl, pairs, occluded):
+            lit = _lit_classes(pose, sun[sl], obs[sl], self.grid_size, pairs, occluded, origins.shape[1])
             total[sl] = self._shaded(pose, *lit, sun[sl], obs[sl])
+
+        threads = _threads()
+        batches = _frame_batches(len(sun), threads)
+        with ThreadPoolExecutor(threads) if len(batches) > 1 else contextlib.nullcontext() as pool:
+            run = pool.map if pool else map
+            for begin in range(0, len(batches), threads):
+                running = batches[begin : begin + threads]
+                pairs = list(run(pairs_of, running))
+                list(run(shade, running, pairs, _occluded(pose, [p.rays for p in pairs])))
         return total
 
     def _shaded(self, pose, frames, classes, area, normal, geo, sun, obs):
@@ -427,6 +448,23 @@ class SceneCache:
             )
             total += pose.raw_area.data.nbytes + pose.raw_area.indices.nbytes + pose.raw_area.indptr.nbytes
         return int(total)
+
+
+def _threads():
+    """Threads the run time shades a light curve with: the cores this process may use, or one
+    where ``OMP_NUM_THREADS=1`` says the process is one of several workers
+    (rsodb.pool.SINGLE_THREAD_ENV)."""
+    if os.environ.get("OMP_NUM_THREADS") == "1":
+        return 1
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def _frame_batches(m, threads):
+    """Slices of the m frames: contiguous, at most _FRAMES_PER_CHUNK long, and one per thread
+    (each at least _MIN_FRAMES_PER_THREAD) where there are enough frames."""
+    n = max(-(-m // _FRAMES_PER_CHUNK), min(threads, m // _MIN_FRAMES_PER_THREAD), 1)
+    edges = np.linspace(0, m, n + 1).round().astype(int)
+    return [slice(a, b) for a, b in itertools.pairwise(edges)]
 
 
 def _exposed_sides(vertices, corners, normals, tolerance):
@@ -496,29 +534,36 @@ def _ray_offset_m(mesh):
     return 1e-4 * max(mesh.radius_m, 1.0)
 
 
-def _lit_classes(pose, sun, obs, grid_size, edge_weights):
-    """Each frame's shading classes with light (:func:`raycast.renderer._cache_kernels.lit_classes`).
+@dataclass(frozen=True, eq=False)
+class _FramePairs:
+    """A batch of frames and its (frame, element) pairs to decide by exact rays (:func:`_pairs_to_decide`)."""
 
-    Returns (k,) frames and classes, the classes' lit, seen and projected areas (k,), and their
-    mean shading and geometric normals (k, 3), weighted by those areas in each frame (so a
-    class shared by faces that are gated or shadowed differently is shaded where its light
-    comes from).
+    sun: np.ndarray  # (m, 3) float32
+    obs: np.ndarray
+    sun_nodes: np.ndarray  # (m, 4) int64, the cube-map nodes around each direction
+    obs_nodes: np.ndarray
+    frames: np.ndarray  # (p,) int64, in frame order
+    elements: np.ndarray  # (p,) int64
+    need: np.ndarray  # (p,) uint8, see raycast.renderer._cache_kernels.mixed_pairs
+    rays: np.ndarray  # (r, 6) float32, raycast.renderer._cache_kernels.pair_rays
 
-    Bit-held elements: where an element's bits at the four grid nodes around the Sun and the
-    four around the observer are all set (98% of visible pairs on COSMOS 2502) it counts whole;
-    where they differ, a shadow or horizon edge crosses the grid cell and bilinear mixing of the
-    bits would smear it: rays toward the exact direction decide, from the element's points at
-    the barycentric ``edge_weights`` (k, 3), and the element counts by the fraction of them
-    both lit and seen (as the direct renderer's shadow rays). Elements facing away from the
-    exact Sun or observer get no rays. Factorised groups add the product of their interpolated
-    factors.
+
+def _pairs_to_decide(pose, sun, obs, grid_size, origins):
+    """The frames' bit-held (element, frame) pairs that exact rays decide, and those rays.
+
+    Where an element's bits at the four grid nodes around the Sun and the four around the
+    observer are all set (98% of visible pairs on COSMOS 2502) it counts whole; where they
+    differ, a shadow or horizon edge crosses the grid cell and bilinear mixing of the bits would
+    smear it: rays toward the exact direction decide, from the element's points ``origins``
+    (e, k, 3) (:func:`_ray_origins`; :func:`_lit_classes` counts the element by the fraction
+    of them both lit and seen, as the direct renderer's shadow rays). Elements facing away from
+    the exact Sun or observer get no rays. So do pairs near a gap in the bits narrower than the
+    grid (:func:`_horizon_gaps`).
     """
-    m = len(sun)
-    area = pose.raw_area
     sun32, obs32 = np.ascontiguousarray(sun, dtype=np.float32), np.ascontiguousarray(obs, dtype=np.float32)
     sun_nodes, obs_nodes = (cube_grid_weights(d, grid_size)[0].astype(np.int64) for d in (sun, obs))
     frames, elements = np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    open_ = np.zeros(0, dtype=np.float32)
+    need, rays = np.zeros(0, dtype=np.uint8), np.zeros((0, 6), dtype=np.float32)
     if pose.raw_count:
         frames, elements, need = _cache_kernels.mixed_pairs(
             pose.raw_bits, sun_nodes, obs_nodes, sun32, obs32, pose.raw_normals
@@ -539,11 +584,33 @@ def _lit_classes(pose, sun, obs, grid_size, edge_weights):
                 order = np.argsort(np.r_[frames, gap[0]], kind="stable")
                 frames, elements, need = (np.r_[a, b][order] for a, b in zip((frames, elements, need), gap))
         if len(frames):
-            rays = _cache_kernels.pair_rays(
-                need, frames, elements, _ray_origins(pose, edge_weights), pose.raw_normals, sun32, obs32
-            )
-            occluded = _raycaster(pose).test_occlusions(rays).numpy()
-            open_ = _cache_kernels.open_fraction(need, occluded, len(edge_weights))
+            rays = _cache_kernels.pair_rays(need, frames, elements, origins, pose.raw_normals, sun32, obs32)
+    return _FramePairs(sun32, obs32, sun_nodes, obs_nodes, frames, elements, need, rays)
+
+
+def _occluded(pose, rays):
+    """Each of a list of (r, 6) ray arrays' occlusion flags, from one call to Embree."""
+    counts = [len(r) for r in rays]
+    if not sum(counts):
+        return [np.zeros(0, dtype=bool) for _ in rays]
+    flags = _raycaster(pose).test_occlusions(np.concatenate(rays)).numpy()
+    return np.split(flags, np.cumsum(counts)[:-1])
+
+
+def _lit_classes(pose, sun, obs, grid_size, pairs, occluded, k):
+    """Each frame's shading classes with light (:func:`raycast.renderer._cache_kernels.lit_classes`).
+
+    ``sun``, ``obs`` (m, 3) directions; ``pairs`` their :func:`_pairs_to_decide` and its rays'
+    ``occluded`` flags, ``k`` rays a pair and way. Returns (k,) frames and classes, the classes' lit, seen and projected areas (k,),
+    and their mean shading and geometric normals (k, 3), weighted by those areas in each frame
+    (so a class shared by faces that are gated or shadowed differently is shaded where its
+    light comes from). Factorised groups add the product of their interpolated factors.
+    """
+    m = len(sun)
+    area = pose.raw_area
+    open_ = np.zeros(0, dtype=np.float32)
+    if len(pairs.frames):
+        open_ = _cache_kernels.open_fraction(pairs.need, occluded, k)
     factor_weight = np.zeros((m, 0), dtype=np.float32)
     if pose.factors.shape[1]:
         product = _interpolation_matrix(sun, grid_size, len(pose.factors)) @ pose.factors
@@ -551,13 +618,13 @@ def _lit_classes(pose, sun, obs, grid_size, edge_weights):
         factor_weight = np.ascontiguousarray(np.add.reduceat(product, pose.factor_starts, axis=1))
     return _cache_kernels.lit_classes(
         pose.raw_bits,
-        sun_nodes,
-        obs_nodes,
+        pairs.sun_nodes,
+        pairs.obs_nodes,
         area.indptr,
         area.indices,
         area.data,
-        frames,
-        elements,
+        pairs.frames,
+        pairs.elements,
         open_,
         pose.area_exposed,
         factor_weight,
@@ -565,8 +632,8 @@ def _lit_classes(pose, sun, obs, grid_size, edge_weights):
         pose.normal_geo,
         pose.normal_shade,
         pose.group_class,
-        sun32,
-        obs32,
+        pairs.sun,
+        pairs.obs,
         pose.n_classes,
     )
 
