@@ -415,7 +415,16 @@ LADDER_SEED = 17
 DIRECT_PIXELS_PER_RADIUS = (75, 150, 300)
 
 
-def scene_rows(comparison, tumble_stride, per_kind, with_cache, with_cycles=True, seed=0):
+def scene_rows(
+    comparison,
+    tumble_stride,
+    per_kind,
+    with_cache,
+    with_cycles=True,
+    seed=0,
+    reference_cycles=REFERENCE_CYCLES,
+    cycles_ladder=CYCLES_LADDER,
+):
     """Result rows of one comparison scene: Cycles at its reference and ladder settings, the
     direct renderer at several pixel sizes, the fast path (if ``with_cache``), each on the
     tumble frames (Cycles on every ``tumble_stride``-th) and the hard frames. Without Cycles
@@ -463,7 +472,7 @@ def scene_rows(comparison, tumble_stride, per_kind, with_cache, with_cycles=True
             finest = DirectRenderer(scene, radius / DIRECT_PIXELS_PER_RADIUS[-1], sampling="raster")
             references[frames] = finest.intensity(fs.sun_body, fs.obs_body)
             continue
-        resolution, samples = REFERENCE_CYCLES
+        resolution, samples = reference_cycles
         settings = CyclesSettings(samples=samples, resolution=resolution, noise_passes=2)
         reference = render_cycles(comparison.mesh, fs.sun_body, fs.obs_body, settings, progress=False)
         references[frames] = reference.intensity_m2_sr
@@ -476,7 +485,7 @@ def scene_rows(comparison, tumble_stride, per_kind, with_cache, with_cycles=True
             150 * reference.cpu_seconds_per_frame,
             150 * reference.seconds_per_frame,
         )
-        for resolution, samples in CYCLES_LADDER:
+        for resolution, samples in cycles_ladder:
             result = render_cycles(
                 comparison.mesh,
                 fs.sun_body,
@@ -531,7 +540,7 @@ def scene_rows(comparison, tumble_stride, per_kind, with_cache, with_cycles=True
     return rows
 
 
-def scenes_chart(rows, path):
+def scenes_chart(rows, path, reference_cycles=REFERENCE_CYCLES):
     import matplotlib
 
     matplotlib.use("Agg")
@@ -559,7 +568,7 @@ def scenes_chart(rows, path):
         ax.axhline(0.02, color="C0", lw=0.8, ls="-.")
         ax.set_title(name)
         ax.set_xlabel("CPU per 150 frames [s]")
-        ax.set_ylabel(f"RMS vs Cycles {REFERENCE_CYCLES[0]}^2 x {REFERENCE_CYCLES[1]} [mag]")
+        ax.set_ylabel(f"RMS vs Cycles {reference_cycles[0]}^2 x {reference_cycles[1]} [mag]")
         ax.grid(True, which="both", alpha=0.3)
     for ax in axes.ravel()[len(names) :]:
         ax.set_visible(False)
@@ -571,15 +580,17 @@ def scenes_chart(rows, path):
     print(f"chart written to {path}")
 
 
-def scenes_section(rows, load, stride, per_kind, with_cycles=True):
+def scenes_section(rows, load, stride, per_kind, with_cycles=True, reference_cycles=REFERENCE_CYCLES):
     reference = (
-        f"Reference: Cycles {REFERENCE_CYCLES[0]}^2 px x {REFERENCE_CYCLES[1]} samples, object terminator "
+        f"Reference: Cycles {reference_cycles[0]}^2 px x {reference_cycles[1]} samples, object terminator "
         f"offsets 0, direct light, box filter; its row gives its own standard error (two passes)."
         if with_cycles
         else f"Reference: the direct renderer at r/{DIRECT_PIXELS_PER_RADIUS[-1]} pixels (no Cycles in this run; "
         f"the render_scenes benchmark compares that renderer with Cycles)."
     )
     title = "Renderers against Cycles on the comparison scenes" if with_cycles else "Fast path on the comparison scenes"
+    if with_cycles and reference_cycles != REFERENCE_CYCLES:
+        title = f"Renderers against a {reference_cycles[1]}-sample Cycles reference on the comparison scenes"
     lines = [
         f"## {title} ({today()}, bench/render.py --scenes)\n",
         f"The scenes and frame sets of raycast.cycles.comparison: tumble frames (one 40 s spin, phase "
@@ -588,7 +599,8 @@ def scenes_section(rows, load, stride, per_kind, with_cycles=True):
         f"per 150 frames: Cycles' CPU per frame x 150 (all its threads; its scene set-up and warm-up render "
         f"not counted), the direct renderer's time on the set scaled to 150 frames (median of 3, warm: its "
         f"first call's set-up, one frame, not counted; before 2026-11-27 it was, scaled with the frames), the "
-        f"fast path timed on all 150 tumble frames. Load average {load:.1f} "
+        f"fast path timed on all 150 tumble frames (its wall time in brackets: it shades batches of frames "
+        f"in parallel threads). Load average {load:.1f} "
         f"at the start (shared 2-core machine).\n",
         "| scene | frames | method | setting | RMS (mag) | max (mag) | CPU per 150 frames | fast-path build |",
         "|---|---|---|---|---|---|---|---|",
@@ -601,7 +613,9 @@ def scenes_section(rows, load, stride, per_kind, with_cycles=True):
         )
         lines.append(
             f"| {r['scene']} | {r['frames']} | {r['method']} | {r['setting']} | {r['rms_mag']:.4f} | "
-            f"{r['max_mag']:.4f} | {r['cpu_s']:.3f} s | {build} |"
+            f"{r['max_mag']:.4f} | {r['cpu_s']:.3f} s"
+            + (f" ({1e3 * r['wall_s']:.1f} ms wall)" if r["method"] == "cached" else "")
+            + f" | {build} |"
         )
     return "\n".join(lines) + "\n"
 
@@ -619,7 +633,8 @@ def scenes_figures(rows):
             figures.append(
                 figure(
                     f"{name} fast path",
-                    f"tumble {c['rms_mag']:.4f} RMS / {c['max_mag']:.4f} max mag, {1e3 * c['cpu_s']:.0f} ms CPU, "
+                    f"tumble {c['rms_mag']:.4f} RMS / {c['max_mag']:.4f} max mag, {1e3 * c['wall_s']:.1f} ms wall "
+                    f"({1e3 * c['cpu_s']:.0f} ms CPU), "
                     f"build peak {c['build_peak_mb']:.1f} MB for {c['tables_mb']:.1f} MB of tables"
                     + (f" ({c['build_peak_mb'] / c['tables_mb']:.2f}x)" if c["tables_mb"] >= 1.0 else ""),
                     "<= 0.01 mag, <= 20 ms, peak <= 3x tables",
@@ -663,18 +678,39 @@ def run_scenes(args, argv):
             args.per_kind,
             with_cache=comparison.name not in args.no_cache.split(","),
             with_cycles=not args.no_cycles,
+            reference_cycles=args.cycles_reference,
+            cycles_ladder=args.cycles_ladder,
         )
         if partial:
             partial.write_text(json.dumps(rows))
     if args.quick:
         return 0
+    default_reference = args.cycles_reference == REFERENCE_CYCLES
     if not args.no_cycles:
-        scenes_chart(rows, SCENES_CHART)
-    section = scenes_section(rows, load, args.tumble_stride, args.per_kind, not args.no_cycles)
+        chart = (
+            SCENES_CHART
+            if default_reference
+            else SCENES_CHART.with_name(f"{SCENES_CHART.stem}_ref{args.cycles_reference[1]}{SCENES_CHART.suffix}")
+        )
+        scenes_chart(rows, chart, args.cycles_reference)
+    section = scenes_section(rows, load, args.tumble_stride, args.per_kind, not args.no_cycles, args.cycles_reference)
     print(section)
     name = "render_scenes" if not args.no_cycles else "render_scenes_fast_path"
+    # A run against another reference is its own benchmark: it does not replace the default's table.
+    name += "" if default_reference or args.no_cycles else f"_reference_{args.cycles_reference[1]}spp"
     record(name, command("render.py", argv), scenes_figures(rows), section, data=rows)
     return 0
+
+
+def cycles_setting(text):
+    """ "256x64" -> (256, 64): a Cycles resolution and samples per pixel."""
+    try:
+        resolution, samples = (int(part) for part in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not RESOLUTIONxSAMPLES, e.g. 256x16") from None
+    if resolution < 8 or samples < 2:
+        raise argparse.ArgumentTypeError(f"{text!r}: the resolution must be >= 8 and the samples >= 2 (two passes)")
+    return resolution, samples
 
 
 def main(argv=None):
@@ -696,6 +732,18 @@ def main(argv=None):
     parser.add_argument("--per-kind", type=int, default=4, help="with --scenes: hard frames of each kind")
     parser.add_argument("--no-cache", default="", help="with --scenes: scenes (joined by commas) without the fast path")
     parser.add_argument("--partial", help="with --scenes: a JSON file of finished scenes' rows, read and extended")
+    parser.add_argument(
+        "--cycles-reference",
+        type=cycles_setting,
+        default=REFERENCE_CYCLES,
+        help="with --scenes: Cycles' reference as RESOLUTIONxSAMPLES (default %(default)s)",
+    )
+    parser.add_argument(
+        "--cycles-ladder",
+        type=lambda text: tuple(cycles_setting(part) for part in text.split(",")),
+        default=CYCLES_LADDER,
+        help="with --scenes: Cycles' cheaper settings, RESOLUTIONxSAMPLES joined by commas (default %(default)s)",
+    )
     args = parser.parse_args(argv)
     if args.scenes:
         return run_scenes(args, argv)
