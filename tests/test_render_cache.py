@@ -233,7 +233,8 @@ def test_threads_give_the_one_thread_light_curve(monkeypatch):
     np.testing.assert_array_equal(cache.intensity(sun, obs), one)
     assert np.count_nonzero(one) > 250
     origins = cache_module._ray_origins(cache.poses[0], cache_module._subpoint_weights(1))
-    assert len(cache_module._pairs_to_decide(cache.poses[0], sun, obs, 16, origins).rays) > 1000  # rays were merged
+    frames = cache_module._Frames.of(sun, obs, 16)
+    assert len(cache_module._pairs_to_decide(cache.poses[0], frames, origins).rays) > 1000  # rays were merged
 
 
 def test_a_pool_worker_shades_with_one_thread(monkeypatch):
@@ -242,6 +243,14 @@ def test_a_pool_worker_shades_with_one_thread(monkeypatch):
     for key, value in SINGLE_THREAD_ENV.items():
         monkeypatch.setenv(key, value)
     assert cache_module._threads() == 1
+    # Many batches on one thread run in the caller, not through the pool.
+    monkeypatch.setattr(cache_module, "_executor", lambda threads: pytest.fail("the pool was used"))
+    scene = articulated_scene()
+    cache = SceneCache.build(scene, grid_size=8)
+    rng = np.random.default_rng(3)
+    sun, obs = unit(rng.normal(size=(600, 3)) + [2.0, 0.0, 0.5]), unit(rng.normal(size=(600, 3)) + [2.0, 0.0, 0.5])
+    assert len(cache_module._frame_batches(600, 1)) == 3
+    assert np.all(np.isfinite(cache.intensity(sun, obs)))
     monkeypatch.delenv("OMP_NUM_THREADS")
     assert cache_module._threads() >= 1
 

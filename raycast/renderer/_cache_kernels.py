@@ -385,18 +385,20 @@ def open_fraction(need, occluded, k):
     """(p,) float32: the fraction of each pair's k points with both rays open, from the
     ``occluded`` flags of :func:`pair_rays`' rays (pairs without a ray are open that way)."""
     n = len(need)
-    is_open = np.ones((n, k), dtype=np.bool_)
-    row = 0
-    for flag in (1, 2):
-        for i in range(n):
-            if need[i] & flag:
-                for j in range(k):
-                    if occluded[row]:
-                        is_open[i, j] = False
-                    row += 1
+    sun_row = 0
+    obs_row = 0
+    for i in range(n):
+        obs_row += k * (need[i] & 1)  # the observer's rays follow all the Sun's
     fraction = np.empty(n, dtype=np.float32)
     for i in range(n):
-        fraction[i] = is_open[i].sum() / k
+        toward_sun, toward_obs = need[i] & 1, (need[i] >> 1) & 1
+        count = 0
+        for j in range(k):
+            if not ((toward_sun and occluded[sun_row + j]) or (toward_obs and occluded[obs_row + j])):
+                count += 1
+        sun_row += k * toward_sun
+        obs_row += k * toward_obs
+        fraction[i] = count / k
     return fraction
 
 

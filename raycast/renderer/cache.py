@@ -386,23 +386,26 @@ class SceneCache:
         with the exact rays of the batches running together in one call (Embree uses every core)."""
         total = np.zeros(len(sun))
         origins = _ray_origins(pose, _subpoint_weights(self.edge_rays_per_side))
+        every = _Frames.of(sun, obs, self.grid_size)
 
         def pairs_of(sl):
-            return _pairs_to_decide(pose, sun[sl], obs[sl], self.grid_size, origins)
+            return _pairs_to_decide(pose, every[sl], origins)
 
         def shade(sl, pairs, occluded):
-            lit = _lit_classes(pose, sun[sl], obs[sl], self.grid_size, pairs, occluded, origins.shape[1])
-            total[sl] = self._shaded(pose, *lit, sun[sl], obs[sl])
+            frames = every[sl]
+            lit = _lit_classes(pose, frames, self.grid_size, pairs, occluded, origins.shape[1])
+            total[sl] = self._shaded(pose, *lit, frames.sun, frames.obs)
 
         # A scene without bit-held elements (a convex one) shades in well under a millisecond:
         # handing its batches to threads would cost more than it saves.
         threads = _threads() if pose.raw_count else 1
         batches = _frame_batches(len(sun), threads)
-        run = _executor(threads).map if len(batches) > 1 else map
+        run = _executor(threads).map if threads > 1 and len(batches) > 1 else map
         for begin in range(0, len(batches), threads):
             running = batches[begin : begin + threads]
             pairs = list(run(pairs_of, running))
-            list(run(shade, running, pairs, _occluded(pose, [p.rays for p in pairs])))
+            occluded = _occluded(pose, [p.rays for p in pairs], threads)
+            list(run(shade, running, pairs, occluded))
         return total
 
     def _shaded(self, pose, frames, classes, area, normal, geo, sun, obs):
@@ -550,21 +553,40 @@ def _ray_offset_m(mesh):
 
 
 @dataclass(frozen=True, eq=False)
-class _FramePairs:
-    """A batch of frames and its (frame, element) pairs to decide by exact rays (:func:`_pairs_to_decide`)."""
+class _Frames:
+    """A light curve's directions as the run time's loops read them; ``frames[sl]`` is a batch."""
 
-    sun: np.ndarray  # (m, 3) float32
+    sun: np.ndarray  # (m, 3) float64 unit vectors, body frame
     obs: np.ndarray
+    sun32: np.ndarray  # the same in float32
+    obs32: np.ndarray
     sun_nodes: np.ndarray  # (m, 4) int64, the cube-map nodes around each direction
     obs_nodes: np.ndarray
+
+    @classmethod
+    def of(cls, sun, obs, grid_size):
+        # Once for the whole light curve: per batch, numpy's call overhead was ~4 ms of a whole
+        # TOPEX pass's 140 ms (19 batches of 256 frames).
+        nodes = (cube_grid_weights(d, grid_size)[0].astype(np.int64) for d in (sun, obs))
+        thin = (np.ascontiguousarray(d, dtype=np.float32) for d in (sun, obs))
+        return cls(sun, obs, *thin, *nodes)
+
+    def __getitem__(self, sl):
+        return _Frames(*(getattr(self, f.name)[sl] for f in dataclasses.fields(self)))
+
+
+@dataclass(frozen=True, eq=False)
+class _FramePairs:
+    """A batch's (frame, element) pairs to decide by exact rays (:func:`_pairs_to_decide`)."""
+
     frames: np.ndarray  # (p,) int64, in frame order
     elements: np.ndarray  # (p,) int64
     need: np.ndarray  # (p,) uint8, see raycast.renderer._cache_kernels.mixed_pairs
     rays: np.ndarray  # (r, 6) float32, raycast.renderer._cache_kernels.pair_rays
 
 
-def _pairs_to_decide(pose, sun, obs, grid_size, origins):
-    """The frames' bit-held (element, frame) pairs that exact rays decide, and those rays.
+def _pairs_to_decide(pose, frames, origins):
+    """A batch of :class:`_Frames`' bit-held (element, frame) pairs that exact rays decide, and those rays.
 
     Where an element's bits at the four grid nodes around the Sun and the four around the
     observer are all set (98% of visible pairs on COSMOS 2502) it counts whole; where they
@@ -575,8 +597,7 @@ def _pairs_to_decide(pose, sun, obs, grid_size, origins):
     the exact Sun or observer get no rays. So do pairs near a gap in the bits narrower than the
     grid (:func:`_horizon_gaps`).
     """
-    sun32, obs32 = np.ascontiguousarray(sun, dtype=np.float32), np.ascontiguousarray(obs, dtype=np.float32)
-    sun_nodes, obs_nodes = (cube_grid_weights(d, grid_size)[0].astype(np.int64) for d in (sun, obs))
+    sun32, obs32, sun_nodes, obs_nodes = frames.sun32, frames.obs32, frames.sun_nodes, frames.obs_nodes
     frames, elements = np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     need, rays = np.zeros(0, dtype=np.uint8), np.zeros((0, 6), dtype=np.float32)
     if pose.raw_count:
@@ -600,41 +621,43 @@ def _pairs_to_decide(pose, sun, obs, grid_size, origins):
                 frames, elements, need = (np.r_[a, b][order] for a, b in zip((frames, elements, need), gap))
         if len(frames):
             rays = _cache_kernels.pair_rays(need, frames, elements, origins, pose.raw_normals, sun32, obs32)
-    return _FramePairs(sun32, obs32, sun_nodes, obs_nodes, frames, elements, need, rays)
+    return _FramePairs(frames, elements, need, rays)
 
 
-def _occluded(pose, rays):
-    """Each of a list of (r, 6) ray arrays' occlusion flags, from one call to Embree."""
+def _occluded(pose, rays, threads):
+    """Each of a list of (r, 6) ray arrays' occlusion flags, from one call to Embree on
+    ``threads`` threads (1 in a pool's worker: the other cores are the other workers')."""
     counts = [len(r) for r in rays]
     if not sum(counts):
         return [np.zeros(0, dtype=bool) for _ in rays]
-    flags = _raycaster(pose).test_occlusions(np.concatenate(rays)).numpy()
+    flags = _raycaster(pose).test_occlusions(np.concatenate(rays), nthreads=1 if threads == 1 else 0).numpy()
     return np.split(flags, np.cumsum(counts)[:-1])
 
 
-def _lit_classes(pose, sun, obs, grid_size, pairs, occluded, k):
+def _lit_classes(pose, frames, grid_size, pairs, occluded, k):
     """Each frame's shading classes with light (:func:`raycast.renderer._cache_kernels.lit_classes`).
 
-    ``sun``, ``obs`` (m, 3) directions; ``pairs`` their :func:`_pairs_to_decide` and its rays'
-    ``occluded`` flags, ``k`` rays a pair and way. Returns (k,) frames and classes, the classes' lit, seen and projected areas (k,),
-    and their mean shading and geometric normals (k, 3), weighted by those areas in each frame
-    (so a class shared by faces that are gated or shadowed differently is shaded where its
-    light comes from). Factorised groups add the product of their interpolated factors.
+    ``frames`` a batch of :class:`_Frames`; ``pairs`` its :func:`_pairs_to_decide` and its
+    rays' ``occluded`` flags, ``k`` rays a pair and way. Returns (k,) frames and classes, the
+    classes' lit, seen and projected areas (k,), and their mean shading and geometric normals
+    (k, 3), weighted by those areas in each frame (so a class shared by faces that are gated or
+    shadowed differently is shaded where its light comes from). Factorised groups add the
+    product of their interpolated factors.
     """
-    m = len(sun)
+    m = len(frames.sun)
     area = pose.raw_area
     open_ = np.zeros(0, dtype=np.float32)
     if len(pairs.frames):
         open_ = _cache_kernels.open_fraction(pairs.need, occluded, k)
     factor_weight = np.zeros((m, 0), dtype=np.float32)
     if pose.factors.shape[1]:
-        product = _interpolation_matrix(sun, grid_size, len(pose.factors)) @ pose.factors
-        product *= _interpolation_matrix(obs, grid_size, len(pose.factors)) @ pose.factors
+        product = _interpolation_matrix(frames.sun, grid_size, len(pose.factors)) @ pose.factors
+        product *= _interpolation_matrix(frames.obs, grid_size, len(pose.factors)) @ pose.factors
         factor_weight = np.ascontiguousarray(np.add.reduceat(product, pose.factor_starts, axis=1))
     return _cache_kernels.lit_classes(
         pose.raw_bits,
-        pairs.sun_nodes,
-        pairs.obs_nodes,
+        frames.sun_nodes,
+        frames.obs_nodes,
         area.indptr,
         area.indices,
         area.data,
@@ -647,8 +670,8 @@ def _lit_classes(pose, sun, obs, grid_size, pairs, occluded, k):
         pose.normal_geo,
         pose.normal_shade,
         pose.group_class,
-        pairs.sun,
-        pairs.obs,
+        frames.sun32,
+        frames.obs32,
         pose.n_classes,
     )
 
