@@ -113,7 +113,7 @@ def whole_pass(args, argv) -> int:
             )
         first = json.loads(index.read_text())[0]
         observed = load_cycles_pass(PASSES_DIR, first)
-        record_ = cycles_config(first["axis"], args.steps, args.walkers, False, 0.0)
+        record_ = cycles_config(first["axis"], args)
         record_["sampler"]["processes"] = args.processes
         what = f"the paper's COSMOS 2502 mesh on a {len(observed)}-sample Cycles pass ({first['file']})"
     record_["sampler"].update(until_converged=args.until_converged, time_limit_s=args.time_limit_s)

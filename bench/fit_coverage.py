@@ -105,8 +105,26 @@ def config_record(
     }
 
 
-def cycles_config(axis: str, args) -> dict:
-    """The fit of a Cycles-rendered pass: the paper's mesh from its file, the spin axis it was rendered with."""
+# The sampler settings of a Cycles fit where the caller's arguments do not give them (the
+# command line's defaults below; bench/fit.py and the pass rendering pass fewer or none).
+CYCLES_FIT_DEFAULTS = {
+    "walkers": 24,
+    "steps": 1500,
+    "until_converged": False,
+    "time_limit_s": 0.0,
+    "search_popsize": 15,
+    "search_maxiter": 100,
+    "init": "search",
+    "search_starts": 1024,
+    "search_polish": 8,
+    "max_points": 0,
+}
+
+
+def cycles_config(axis: str, args=None) -> dict:
+    """The fit of a Cycles-rendered pass: the paper's mesh from its file, the spin axis it was
+    rendered with; ``args`` (a namespace) sets the sampler, CYCLES_FIT_DEFAULTS the rest."""
+    args = argparse.Namespace(**{**CYCLES_FIT_DEFAULTS, **(vars(args) if args is not None else {})})
     sampler = {
         "n_walkers": args.walkers,
         "n_steps": args.steps,
@@ -205,7 +223,7 @@ def render_cycles_passes(directory: Path, count: int, seed: int, resolution: int
         axis = "x" if i % 2 == 0 else "z"
         times = windows[i] + (np.arange(round(WINDOW_S / CADENCE_S)) * CADENCE_S * 1e9).astype("timedelta64[ns]")
         geometry = PassGeometry.compute(satellite, DERENIVKA, times, CADENCE_S, n_sub=1)
-        space = FitConfig.from_dict(cycles_config(axis, 10, 12, False, 0.0)).parameter_space({})
+        space = FitConfig.from_dict(cycles_config(axis)).parameter_space({})
         frame = SpinStateModel(geometry, ConvexFacets.box(), "precessing", {"spin_axis": axis}, (), "V", 1000.0)
         started = time.perf_counter()
         for attempt in range(20):

@@ -122,3 +122,25 @@ def test_look_alike_turns_of_a_fit_read_the_truth_over_the_median():
     assert _wrapped(space, truth) == ["spin_phase_deg"]
     turns = look_alike_turns(_PhaseModel(2), values, _wrapped(space, truth), 0.005)
     assert turns == {"spin_phase_deg": 180.0}
+
+
+def test_cycles_fit_configuration_takes_any_callers_settings():
+    """The Cycles passes are drawn from the configuration's priors before any sampler settings
+    exist, and bench/fit.py passes only its own: both must make a valid configuration."""
+    import argparse
+
+    from bench.fit_coverage import CYCLES_FIT_DEFAULTS, PAPER_OBJ, cycles_config
+
+    bare = FitConfig.from_dict(cycles_config("x"))
+    assert bare.parameter_space({}).names[:3] == ("spin_period_s", "spin_phase_deg", "precession_period_s")
+    assert bare.sampler.n_steps == CYCLES_FIT_DEFAULTS["steps"]
+    from_fit_bench = argparse.Namespace(walkers=20, steps=500, until_converged=True, time_limit_s=60.0, n_sub=2)
+    config = cycles_config("z", from_fit_bench)
+    assert config["model"] == {
+        "mesh": str(PAPER_OBJ),
+        "materials": str(PAPER_OBJ.with_suffix(".materials.json")),
+        "spin_axis": "z",
+        "n_sub": 1,
+    }
+    parsed = FitConfig.from_dict(config)
+    assert (parsed.sampler.n_walkers, parsed.sampler.n_steps, parsed.sampler.until_converged) == (20, 500, True)
