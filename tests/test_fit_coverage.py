@@ -144,3 +144,37 @@ def test_cycles_fit_configuration_takes_any_callers_settings():
     }
     parsed = FitConfig.from_dict(config)
     assert (parsed.sampler.n_walkers, parsed.sampler.n_steps, parsed.sampler.until_converged) == (20, 500, True)
+
+
+def test_noisy_cycles_frames_are_rendered_again_with_more_samples():
+    """Glint frames whose Cycles noise stays high get a second round; quiet frames none."""
+    from dataclasses import dataclass
+    import types
+
+    from bench.fit_coverage import CYCLES_NOISE_LIMIT_MAG, CYCLES_REFINE, refine_noisy_frames
+
+    @dataclass(frozen=True)
+    class Settings:
+        samples: int
+
+    # Noise falls as 1/sqrt(samples) from these frames' 16-sample values (mag).
+    start = np.array([0.001, 0.004, 0.012, 0.2])
+    asked = []
+
+    def render(sun, obs, settings):
+        asked.append((len(sun), settings.samples))
+        frames = [int(round(v)) for v in sun[:, 0]]
+        noise_mag = start[frames] * np.sqrt(16 / settings.samples)
+        return types.SimpleNamespace(
+            intensity_m2_sr=np.full(len(frames), 2.0), noise_rel=noise_mag / (2.5 / np.log(10))
+        )
+
+    index = np.arange(4, dtype=float)[:, None, None] * np.ones((4, 1, 3))
+    body = types.SimpleNamespace(sun_body=index, obs_body=index, sunlit=np.ones((4, 1)))
+    intensity, noise, refined = refine_noisy_frames(None, body, Settings(16), np.ones(4), start.copy(), render)
+    # Frames 2 and 3 are above the limit at 16 and at 64 samples; 0 and 1 never are.
+    assert asked == [(2, 16 * CYCLES_REFINE), (2, 16 * CYCLES_REFINE**2)]
+    assert refined == {str(16 * CYCLES_REFINE): 2, str(16 * CYCLES_REFINE**2): 2}
+    np.testing.assert_allclose(noise, [0.001, 0.004, 0.003, 0.05])
+    np.testing.assert_array_equal(intensity, [1.0, 1.0, 2.0, 2.0])
+    assert noise[3] > CYCLES_NOISE_LIMIT_MAG  # what is left is reported, not hidden
