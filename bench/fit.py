@@ -106,13 +106,15 @@ def whole_pass(args, argv) -> int:
     else:
         from bench.fit_coverage import PASSES_DIR, cycles_config, load_cycles_pass
 
-        index = PASSES_DIR / "truths.json"
+        passes = Path(args.passes_dir) if args.passes_dir else PASSES_DIR
+        index = passes / "truths.json"
         if not index.exists():
             raise SystemExit(
-                f"no Cycles passes in {PASSES_DIR}: run python bench/fit_coverage.py --cycles --render-only"
+                f"no Cycles passes in {passes}: run python bench/fit_coverage.py --cycles --render-only "
+                f"--passes-dir {passes}"
             )
         first = json.loads(index.read_text())[0]
-        observed = load_cycles_pass(PASSES_DIR, first)
+        observed = load_cycles_pass(passes, first)
         record_ = cycles_config(first["axis"], args)
         record_["sampler"]["processes"] = args.processes
         what = f"the paper's COSMOS 2502 mesh on a {len(observed)}-sample Cycles pass ({first['file']})"
@@ -171,6 +173,11 @@ def main(argv=None) -> int:
     parser.add_argument("--n-sub", type=int, default=2, help="exposure sub-samples in the fit (default 2)")
     parser.add_argument("--processes", type=int, default=0, help="0 = one per core")
     parser.add_argument("--no-record", action="store_true", help="print only; record nothing")
+    parser.add_argument(
+        "--passes-dir",
+        help="--pass paper-mesh: the Cycles passes (bench/fit_coverage.py --cycles --passes-dir; "
+        "default: that script's default)",
+    )
     args = parser.parse_args(argv)
     if args.pass_name != "bench30":
         return whole_pass(args, argv)
