@@ -364,6 +364,15 @@ def _cycles_task(task):
     )
 
 
+def correlation_time_s(series: np.ndarray, cadence_s: float) -> float:
+    """Where the autocorrelation of an evenly sampled series first falls below 1/e, in seconds:
+    the correlation time of a model error (`[likelihood] model_error_time_s`)."""
+    centred = series - series.mean()
+    acf = np.correlate(centred, centred, "full")[centred.size - 1 :] / np.dot(centred, centred)
+    below = np.flatnonzero(acf < np.exp(-1.0))
+    return float(below[0] * cadence_s) if below.size else float(centred.size * cadence_s)
+
+
 def forward_model_at_truth(directory: Path, records: list[dict], argv, args) -> int:
     """The project's direct renderer of the paper mesh, and the fit's own model (the cached
     renderer of the same mesh, as a fit of `--cycles` builds it), against each Cycles pass's
@@ -411,7 +420,8 @@ def forward_model_at_truth(directory: Path, records: list[dict], argv, args) -> 
         rows.append((rec, rms, worst, float(np.ptp(data["clean_mag"])), accuracy, fit_rms, fit_worst))
         print(
             f"{rec['file']} axis {rec['axis']}: project - Cycles at the truth {rms:.4f} mag RMS (max {worst:.3f}; "
-            f"direct renderer at {accuracy} mag); the fit's cached model {fit_rms:.4f} (max {fit_worst:.3f})",
+            f"direct renderer at {accuracy} mag); the fit's cached model {fit_rms:.4f} (max {fit_worst:.3f}, "
+            f"correlated over {correlation_time_s(cached, CADENCE_S):.1f} s)",
             flush=True,
         )
     if args.no_record:

@@ -178,3 +178,15 @@ def test_noisy_cycles_frames_are_rendered_again_with_more_samples():
     np.testing.assert_allclose(noise, [0.001, 0.004, 0.003, 0.05])
     np.testing.assert_array_equal(intensity, [1.0, 1.0, 2.0, 2.0])
     assert noise[3] > CYCLES_NOISE_LIMIT_MAG  # what is left is reported, not hidden
+
+
+def test_correlation_time_of_an_ar1_series():
+    from bench.fit_coverage import correlation_time_s
+
+    rng = np.random.default_rng(8)
+    a = np.exp(-0.2 / 3.0)  # 5 fps, a 3 s correlation time
+    series = np.zeros(20000)
+    for i in range(1, series.size):
+        series[i] = a * series[i - 1] + rng.normal()
+    assert correlation_time_s(series, 0.2) == pytest.approx(3.0, abs=0.4)
+    assert correlation_time_s(rng.normal(size=5000), 0.2) == pytest.approx(0.2)
