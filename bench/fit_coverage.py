@@ -123,8 +123,6 @@ CYCLES_FIT_DEFAULTS = {
     "search_starts": 1024,
     "search_polish": 8,
     "max_points": 0,
-    "model_error_mag": 0.0,
-    "model_error_time_s": 2.0,
 }
 
 
@@ -143,7 +141,7 @@ def cycles_config(axis: str, args=None) -> dict:
     }
     if args.init != "search":  # (only when asked: the default start's configuration is as it was)
         sampler.update(init=args.init, search_starts=args.search_starts, search_polish=args.search_polish)
-    config = {
+    return {
         "name": "cycles",
         "band_draws": 0,
         "model": {"mesh": str(PAPER_OBJ), "materials": str(PAPER_MATERIALS), "spin_axis": axis, "n_sub": 1},
@@ -151,9 +149,6 @@ def cycles_config(axis: str, args=None) -> dict:
         "parameters": CYCLES_PRIORS,
         "sampler": sampler,
     }
-    if args.model_error_mag:  # (only when asked: the white likelihood's configuration is as it was)
-        config["likelihood"] = {"model_error_mag": args.model_error_mag, "model_error_time_s": args.model_error_time_s}
-    return config
 
 
 def find_windows(satellite, site, count: int) -> list:
@@ -371,7 +366,7 @@ def _cycles_task(task):
 
 def correlation_time_s(series: np.ndarray, cadence_s: float) -> float:
     """Where the autocorrelation of an evenly sampled series first falls below 1/e, in seconds:
-    the correlation time of a model error (`[likelihood] model_error_time_s`)."""
+    how long a model error stays alike from sample to sample."""
     centred = series - series.mean()
     acf = np.correlate(centred, centred, "full")[centred.size - 1 :] / np.dot(centred, centred)
     below = np.flatnonzero(acf < np.exp(-1.0))
@@ -624,12 +619,6 @@ def run_cycles(args, argv) -> int:
         if folded
         else "Every phase scored modulo its full turn (no look-alike turn found)."
     )
-    model_error_text = (
-        f", a model error correlated in time of {args.model_error_mag} mag over {args.model_error_time_s} s "
-        "([likelihood] model_error_mag)"
-        if args.model_error_mag
-        else ""
-    )
     refined = [sum(r["cycles"].get("refined_frames", {}).values()) for r in records]
     refined_text = f"{sum(refined)} frame renders in {sum(1 for n in refined if n)} of {len(records)} passes"
     section = f"""
@@ -646,7 +635,7 @@ the footprint, {cycles["samples_per_px"]} samples/px in two seeds, {cycles["term
 Cycles noise (the two seeds' standard error) is above {CYCLES_NOISE_LIMIT_MAG} mag rendered again with
 {CYCLES_REFINE}x the samples, up to {CYCLES_REFINE_ROUNDS} times ({refined_text}); the noise left,
 {np.median([r["cycles"]["noise_mag_rms"] for r in records]):.4f} mag RMS per frame (median over passes; max
-{max(r["cycles"]["noise_mag_max"] for r in records):.4f}), is added in quadrature to each sample's quoted error. Fit: jitter free on 0-0.1 mag{model_error_text}, {args.walkers} walkers,
+{max(r["cycles"]["noise_mag_max"] for r in records):.4f}), is added in quadrature to each sample's quoted error. Fit: jitter free on 0-0.1 mag, {args.walkers} walkers,
 {args.steps} steps{" until converged (at most)" if args.until_converged else ""}, global search first ({search}){limits}. The fits took
 {fit_minutes:.0f} min together, {elapsed / 60:.0f} min of wall time on {os.cpu_count()} cores in the last run (load average
 {load[0]:.1f} at the end).
@@ -750,13 +739,6 @@ def main(argv=None) -> int:
         default=0,
         help="fit at most this many points, binning consecutive exposures (default 0: all 600)",
     )
-    cycles.add_argument(
-        "--model-error-mag",
-        type=float,
-        default=0.0,
-        help="fit with a model error correlated in time of this size ([likelihood] model_error_mag; default 0: none)",
-    )
-    cycles.add_argument("--model-error-time-s", type=float, default=2.0, help="and this correlation time (default 2 s)")
     cycles.add_argument("--until-converged", action="store_true", help="sample until converged (--steps caps it)")
     cycles.add_argument(
         "--time-limit-s", type=float, default=0.0, help="stop each fit after this (its search included)"

@@ -133,23 +133,12 @@ class LikelihoodConfig:
 
     kind: str = "gaussian"
     offset: str = "marginalised"
-    # A model error correlated in time (rsodb.fit.likelihood): its standard deviation (0: none)
-    # and correlation time.
-    model_error_mag: float = 0.0
-    model_error_time_s: float = 2.0
 
     def __post_init__(self):
         if self.kind not in LIKELIHOODS:
             raise ValueError(f"[likelihood] kind={self.kind!r} is not one of {', '.join(LIKELIHOODS)}")
         if self.offset not in OFFSET_MODES:
             raise ValueError(f"[likelihood] offset={self.offset!r} is not one of {', '.join(OFFSET_MODES)}")
-        error, time_s = self.model_error_mag, self.model_error_time_s
-        if isinstance(error, bool) or not isinstance(error, (int, float)) or not (0.0 <= error < 1.0):
-            raise ValueError(f"[likelihood] model_error_mag={error!r} must be a number of magnitudes in [0, 1)")
-        if isinstance(time_s, bool) or not isinstance(time_s, (int, float)) or not (0.0 < time_s < math.inf):
-            raise ValueError(f"[likelihood] model_error_time_s={time_s!r} must be a positive number of seconds")
-        if error > 0.0 and self.kind != "gaussian":
-            raise ValueError(f"[likelihood] model_error_mag needs kind = 'gaussian', not {self.kind!r}")
 
 
 def _check_parameter_spec(name: str, spec) -> None:

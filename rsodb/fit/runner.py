@@ -172,16 +172,7 @@ class FitProblem:
                 epoch_s,
             )
             mag, err = chosen.magnitudes(observed, config.data.mag_err_floor)
-            times = chosen.time_utc(observed)
-            likelihood = make_likelihood(
-                config.likelihood.kind,
-                mag,
-                err,
-                config.likelihood.offset,
-                time_s=(times - times[0]) / np.timedelta64(1, "s"),
-                model_error_mag=config.likelihood.model_error_mag,
-                model_error_time_s=config.likelihood.model_error_time_s,
-            )
+            likelihood = make_likelihood(config.likelihood.kind, mag, err, config.likelihood.offset)
             return Posterior(space, model, likelihood)
 
         posterior = posterior_on(selection, config.model.n_sub or None)
