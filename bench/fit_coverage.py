@@ -110,26 +110,12 @@ def config_record(
     }
 
 
-# The sampler settings of a Cycles fit where the caller's arguments do not give them (the
-# command line's defaults below; bench/fit.py and the pass rendering pass fewer or none).
-CYCLES_FIT_DEFAULTS = {
-    "walkers": 24,
-    "steps": 1500,
-    "until_converged": False,
-    "time_limit_s": 0.0,
-    "search_popsize": 15,
-    "search_maxiter": 100,
-    "init": "search",
-    "search_starts": 1024,
-    "search_polish": 8,
-    "max_points": 0,
-}
-
-
 def cycles_config(axis: str, args=None) -> dict:
     """The fit of a Cycles-rendered pass: the paper's mesh from its file, the spin axis it was
-    rendered with; ``args`` (a namespace) sets the sampler, CYCLES_FIT_DEFAULTS the rest."""
-    args = argparse.Namespace(**{**CYCLES_FIT_DEFAULTS, **(vars(args) if args is not None else {})})
+    rendered with; ``args`` (a namespace; bench/fit.py's and the pass rendering give fewer or
+    none) sets the sampler, this script's command-line defaults the rest."""
+    defaults = vars(command_line().parse_args([]))
+    args = argparse.Namespace(**{**defaults, **(vars(args) if args is not None else {})})
     sampler = {
         "n_walkers": args.walkers,
         "n_steps": args.steps,
@@ -701,7 +687,8 @@ def coverage_figure(recoveries, path: Path, names=None) -> None:
     plt.close(figure)
 
 
-def main(argv=None) -> int:
+def command_line() -> argparse.ArgumentParser:
+    """This script's arguments (their defaults are also a Cycles fit's, `cycles_config`)."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--truths", type=int, default=20)
     parser.add_argument("--shape", default="topex", help="model used to inject and fit (default topex)")
@@ -744,7 +731,11 @@ def main(argv=None) -> int:
         "--time-limit-s", type=float, default=0.0, help="stop each fit after this (its search included)"
     )
     cycles.add_argument("--seed", type=int, default=0, help="seeds the truths, noise and Cycles")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def main(argv=None) -> int:
+    args = command_line().parse_args(argv)
     if args.cycles:
         return run_cycles(args, argv)
 

@@ -129,11 +129,11 @@ def test_cycles_fit_configuration_takes_any_callers_settings():
     exist, and bench/fit.py passes only its own: both must make a valid configuration."""
     import argparse
 
-    from bench.fit_coverage import CYCLES_FIT_DEFAULTS, PAPER_OBJ, cycles_config
+    from bench.fit_coverage import PAPER_OBJ, command_line, cycles_config
 
     bare = FitConfig.from_dict(cycles_config("x"))
     assert bare.parameter_space({}).names[:3] == ("spin_period_s", "spin_phase_deg", "precession_period_s")
-    assert bare.sampler.n_steps == CYCLES_FIT_DEFAULTS["steps"]
+    assert bare.sampler.n_steps == command_line().parse_args([]).steps == 1500
     from_fit_bench = argparse.Namespace(walkers=20, steps=500, until_converged=True, time_limit_s=60.0, n_sub=2)
     config = cycles_config("z", from_fit_bench)
     assert config["model"] == {

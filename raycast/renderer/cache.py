@@ -585,8 +585,8 @@ class _FramePairs:
     rays: np.ndarray  # (r, 6) float32, raycast.renderer._cache_kernels.pair_rays
 
 
-def _pairs_to_decide(pose, frames, origins):
-    """A batch of :class:`_Frames`' bit-held (element, frame) pairs that exact rays decide, and those rays.
+def _pairs_to_decide(pose, batch, origins):
+    """A ``batch`` of :class:`_Frames`' bit-held (element, frame) pairs that exact rays decide, and those rays.
 
     Where an element's bits at the four grid nodes around the Sun and the four around the
     observer are all set (98% of visible pairs on COSMOS 2502) it counts whole; where they
@@ -597,7 +597,7 @@ def _pairs_to_decide(pose, frames, origins):
     the exact Sun or observer get no rays. So do pairs near a gap in the bits narrower than the
     grid (:func:`_horizon_gaps`).
     """
-    sun32, obs32, sun_nodes, obs_nodes = frames.sun32, frames.obs32, frames.sun_nodes, frames.obs_nodes
+    sun32, obs32, sun_nodes, obs_nodes = batch.sun32, batch.obs32, batch.sun_nodes, batch.obs_nodes
     frames, elements = np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     need, rays = np.zeros(0, dtype=np.uint8), np.zeros((0, 6), dtype=np.float32)
     if pose.raw_count:
