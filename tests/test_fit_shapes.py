@@ -68,6 +68,29 @@ def test_a_box_mesh_file_fits_as_the_analytic_box(tmp_path, template):
     assert len(list((tmp_path / "shapes").glob("*.pkl"))) == 1
 
 
+def test_the_cache_grid_follows_the_length_of_the_fit(tmp_path, template):
+    # A fit planning >= 5000 evaluations (walkers x steps) gets the finer direction grid, a shorter
+    # one the renderer's default, and [model] grid_size overrides both; each grid is its own
+    # stored cache.
+    obj, materials = write_box(tmp_path)
+    store = ShapeStore(tmp_path / "shapes")
+    grids = {}
+    for label, model, sampler in (
+        ("long", {}, {"n_walkers": 10, "n_steps": 500}),
+        ("short", {}, {"n_walkers": 10, "n_steps": 499}),
+        ("set", {"grid_size": 16}, {"n_walkers": 10, "n_steps": 500}),
+    ):
+        record = {
+            "model": {"mesh": str(obj), "materials": str(materials), "n_sub": 1, **model},
+            "parameters": PRIOR,
+            "sampler": sampler,
+        }
+        problem = FitProblem.build(template, FitConfig.from_dict(record), store=store)
+        grids[label] = problem.posterior.model.brightness.grid_size
+    assert grids == {"long": 64, "short": 32, "set": 16}
+    assert len(list((tmp_path / "shapes").glob("*.pkl"))) == 3
+
+
 def test_the_stored_cache_is_reused_and_keyed_by_content(tmp_path, template, monkeypatch):
     obj, materials = write_box(tmp_path)
     record = {"model": {"mesh": str(obj), "materials": str(materials), "n_sub": 1}, "parameters": PRIOR}

@@ -43,7 +43,8 @@ class ModelConfig:
 
     ``mesh`` (OBJ, PLY, glTF) with ``materials`` (its materials JSON) and ``articulations``
     (tables of ``parameter``, ``part``, ``axis``, ``point_m``, ``rest_deg``) fits any scene;
-    relative paths in a TOML file are relative to that file.
+    relative paths in a TOML file are relative to that file. ``grid_size`` is the shape cache's
+    direction grid (0: chosen from the sampler's length, `rsodb.fit.shapes.cache_grid_size`).
     """
 
     shape: str = "auto"
@@ -56,6 +57,7 @@ class ModelConfig:
     renderer: str = "cached"
     accuracy_mag: float = 0.01
     n_sub: int = 0
+    grid_size: int = 0
 
     def __post_init__(self):
         if self.shape != "auto" and self.shape not in SHAPES:
@@ -88,6 +90,11 @@ class ModelConfig:
             raise ValueError(f"[model] renderer={self.renderer!r} must be 'cached' or 'direct'")
         if not (isinstance(self.n_sub, int) and 0 <= self.n_sub <= 64):
             raise ValueError(f"[model] n_sub={self.n_sub!r} must be a whole number 0..64 (0 chooses it)")
+        if not (isinstance(self.grid_size, int) and (self.grid_size == 0 or 4 <= self.grid_size <= 256)):
+            raise ValueError(
+                f"[model] grid_size={self.grid_size!r} must be 0 (chosen from the sampler's length) "
+                "or a whole number 4..256"
+            )
         if not (isinstance(self.accuracy_mag, (int, float)) and 0 < self.accuracy_mag < 1):
             raise ValueError(
                 f"[model] accuracy_mag={self.accuracy_mag!r} must be a small positive number of magnitudes"

@@ -28,7 +28,7 @@ from rsodb.fit.result import FitResult, best_and_draws
 from rsodb.fit.sampler import run_sampler
 from rsodb.fit.selection import Selection, select_samples
 from rsodb.fit.shape_store import ShapeStore
-from rsodb.fit.shapes import MATERIAL_PARAMETERS, Shape, brightness_for, resolve_shape
+from rsodb.fit.shapes import MATERIAL_PARAMETERS, Shape, brightness_for, cache_grid_size, resolve_shape
 from rsodb.periods.result import PeriodResult
 
 __all__ = [
@@ -150,6 +150,7 @@ class FitProblem:
             fixed,
             renderer=config.model.renderer,
             accuracy_mag=config.model.accuracy_mag,
+            grid_size=config.model.grid_size or cache_grid_size(config.sampler.n_walkers * config.sampler.n_steps),
             progress=progress,
             store=store,
             name=shape_name,
