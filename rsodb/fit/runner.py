@@ -69,6 +69,13 @@ def spin_period_bounds(space) -> tuple[float, float]:
     return abs(low), abs(high)
 
 
+def planned_frame_evaluations(config: FitConfig, observed, selection: Selection, bounds) -> int:
+    """Walkers x steps x the frames of one evaluation (samples x exposure sub-samples, as
+    `geometry_at` will choose them): the work a shape cache's grid is chosen for."""
+    n_sub = config.model.n_sub or choose_n_sub(selection.exposure_s(observed), bounds[0])
+    return config.sampler.n_walkers * config.sampler.n_steps * selection.n * n_sub
+
+
 @dataclass(frozen=True, eq=False)
 class FitProblem:
     """A posterior ready to sample, with what is needed to summarise and store its result.
@@ -150,7 +157,8 @@ class FitProblem:
             fixed,
             renderer=config.model.renderer,
             accuracy_mag=config.model.accuracy_mag,
-            grid_size=config.model.grid_size or cache_grid_size(config.sampler.n_walkers * config.sampler.n_steps),
+            grid_size=config.model.grid_size
+            or cache_grid_size(planned_frame_evaluations(config, observed, selection, bounds)),
             progress=progress,
             store=store,
             name=shape_name,

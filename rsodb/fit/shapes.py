@@ -70,23 +70,28 @@ __all__ = [
 MATERIAL_PARAMETERS = ("albedo_scale", "roughness")
 # Articulation grid points per degree of a free articulation's prior range (at least 3).
 _GRID_PER_DEG = 0.5
-# The cache's cube-map resolution: the renderer's default, and the finer one of long fits.
+# The cache's cube-map resolution: the renderer's default, and the finer ones of long fits,
+# from this many planned frame-evaluations (walkers x steps x frames an evaluation) on.
 CACHE_GRID_SIZE = 32
-FINE_CACHE_GRID_SIZE = 64
-# Planned evaluations (walkers x steps) from which the finer grid pays for its longer build.
-FINE_GRID_EVALUATIONS = 5000
+FINER_GRIDS = ((2_000_000, 64), (20_000_000, 96))
 
 
-def cache_grid_size(n_evaluations: int) -> int:
-    """The cube-map resolution of a fit's cache, for a sampler planning ``n_evaluations``.
+def cache_grid_size(frame_evaluations: float) -> int:
+    """The cube-map resolution of a fit's cache, for a sampler planning ``frame_evaluations``
+    (walkers x steps x the frames, exposure sub-samples included, of one evaluation).
 
-    Doubling the grid halves the exact shadow rays that decide the pairs near a shadow edge
-    (every scene's rays fall as 1/N) at 4x the build's rays. Measured (docs/fitting.md): on the
-    whole TOPEX pass an evaluation takes 35% less CPU, on the paper's COSMOS 2502 mesh 30%
-    less, for 8 s and 71 s more build on one core; the second pays from about 3000
-    evaluations, so the finer grid is taken from FINE_GRID_EVALUATIONS.
+    The exact shadow rays that decide the pairs near a shadow edge fall as 1/N with the
+    resolution N, the build's rays grow as N^2. Measured on one core (docs/fitting.md): an
+    evaluation of the whole TOPEX pass (4640 frames) near its mode takes 105 ms at N = 64 and
+    90 ms at N = 96 (123 -> 79 ms from 32 to 64 on prior draws) for 11 and 26 s of build; the
+    paper's COSMOS 2502 mesh on 600 frames 79 -> 55 ms from 32 to 64 for 29 -> 100 s. The
+    thresholds are where the saving, spread over two workers, repays the longer build.
     """
-    return FINE_CACHE_GRID_SIZE if n_evaluations >= FINE_GRID_EVALUATIONS else CACHE_GRID_SIZE
+    size = CACHE_GRID_SIZE
+    for threshold, finer in FINER_GRIDS:
+        if frame_evaluations >= threshold:
+            size = finer
+    return size
 
 
 @dataclass(frozen=True)
