@@ -70,10 +70,11 @@ __all__ = [
 MATERIAL_PARAMETERS = ("albedo_scale", "roughness")
 # Articulation grid points per degree of a free articulation's prior range (at least 3).
 _GRID_PER_DEG = 0.5
-# The cache's cube-map resolution: the renderer's default, and the finer ones of long fits,
-# from this many planned frame-evaluations (walkers x steps x frames an evaluation) on.
+# The cache's cube-map resolution: the renderer's default, and the finer one of fits planning
+# at least FINE_GRID_FRAME_EVALUATIONS (walkers x steps x frames an evaluation).
 CACHE_GRID_SIZE = 32
-FINER_GRIDS = ((2_000_000, 64), (20_000_000, 96))
+FINE_CACHE_GRID_SIZE = 64
+FINE_GRID_FRAME_EVALUATIONS = 2_000_000
 
 
 def cache_grid_size(frame_evaluations: float) -> int:
@@ -81,17 +82,14 @@ def cache_grid_size(frame_evaluations: float) -> int:
     (walkers x steps x the frames, exposure sub-samples included, of one evaluation).
 
     The exact shadow rays that decide the pairs near a shadow edge fall as 1/N with the
-    resolution N, the build's rays grow as N^2. Measured on one core (docs/fitting.md): an
-    evaluation of the whole TOPEX pass (4640 frames) near its mode takes 105 ms at N = 64 and
-    90 ms at N = 96 (123 -> 79 ms from 32 to 64 on prior draws) for 11 and 26 s of build; the
-    paper's COSMOS 2502 mesh on 600 frames 79 -> 55 ms from 32 to 64 for 29 -> 100 s. The
-    thresholds are where the saving, spread over two workers, repays the longer build.
+    resolution N; the build's rays grow as N^2. Measured on one core (docs/fitting.md): from
+    N = 32 to 64 an evaluation of the whole TOPEX pass (4640 frames) takes 123 -> 79 ms for
+    3 -> 11 s of build, the paper's COSMOS 2502 mesh on 600 frames 79 -> 55 ms for 29 -> 100
+    s: the finer grid repays its build from about 1.8e6 frame-evaluations on the paper mesh.
+    N = 96 saved nothing on the TOPEX pass: its exact rays cost 15 ms less, reading the 66 MB
+    table (30 MB at 64, within the 32 MB cache of this machine's processor) 14 ms more.
     """
-    size = CACHE_GRID_SIZE
-    for threshold, finer in FINER_GRIDS:
-        if frame_evaluations >= threshold:
-            size = finer
-    return size
+    return FINE_CACHE_GRID_SIZE if frame_evaluations >= FINE_GRID_FRAME_EVALUATIONS else CACHE_GRID_SIZE
 
 
 @dataclass(frozen=True)
