@@ -97,7 +97,7 @@ def test_defaults_and_overrides():
         ({"model": {"shape": "topex", "mesh": "x.obj"}}, r"gives both shape='topex' and mesh='x.obj'; keep one"),
         (
             {"model": {"grid_size": 2}},
-            r"\[model\] grid_size=2 must be 0 \(chosen from the sampler's length\) or a whole number 4..256",
+            r"\[model\] grid_size=2 must be 0 \(chosen from the fit's planned work\) or a whole number 4..256",
         ),
         ({"sampler": {"n_walker": 4}}, r"\[sampler\] has unknown keys \['n_walker'\]"),
         ({"parameters": {"spin_rate": 1.0}}, r"\[parameters\] unknown parameter 'spin_rate'; known parameters"),

@@ -44,7 +44,7 @@ class ModelConfig:
     ``mesh`` (OBJ, PLY, glTF) with ``materials`` (its materials JSON) and ``articulations``
     (tables of ``parameter``, ``part``, ``axis``, ``point_m``, ``rest_deg``) fits any scene;
     relative paths in a TOML file are relative to that file. ``grid_size`` is the shape cache's
-    direction grid (0: chosen from the sampler's length, `rsodb.fit.shapes.cache_grid_size`).
+    direction grid (0: chosen from the fit's planned work, `rsodb.fit.shapes.cache_grid_size`).
     """
 
     shape: str = "auto"
@@ -92,7 +92,7 @@ class ModelConfig:
             raise ValueError(f"[model] n_sub={self.n_sub!r} must be a whole number 0..64 (0 chooses it)")
         if not (isinstance(self.grid_size, int) and (self.grid_size == 0 or 4 <= self.grid_size <= 256)):
             raise ValueError(
-                f"[model] grid_size={self.grid_size!r} must be 0 (chosen from the sampler's length) "
+                f"[model] grid_size={self.grid_size!r} must be 0 (chosen from the fit's planned work) "
                 "or a whole number 4..256"
             )
         if not (isinstance(self.accuracy_mag, (int, float)) and 0 < self.accuracy_mag < 1):
