@@ -90,17 +90,12 @@ WHOLE_TARGETS_S = {"topex-whole": 600.0, "paper-mesh": 900.0}
 
 
 def truth_offsets(result, truth: dict) -> str:
-    """Each true parameter's offset from the posterior median in posterior sigmas (half the 16-84%
-    width; phases wrapped), e.g. ``spin_period_s +0.4``."""
-    median, p16, p84 = result.values("median"), result.values("p16"), result.values("p84")
-    parts = []
-    for name, value in truth.items():
-        offset = median[name] - value
-        if name.endswith("_phase_deg"):
-            offset = (offset + 180.0) % 360.0 - 180.0
-        sigma = max((p84[name] - p16[name]) / 2.0, 1e-12)
-        parts.append(f"{name} {offset / sigma:+.1f}")
-    return "median - truth in posterior sigmas: " + ", ".join(parts)
+    """Each true parameter's offset from the posterior median in posterior sigmas
+    (`rsodb.fit.coverage.bias_sigmas`), e.g. ``spin_period_s +0.4``."""
+    from rsodb.fit.coverage import bias_sigmas
+
+    offsets = bias_sigmas(result.space, result, truth)
+    return "median - truth in posterior sigmas: " + ", ".join(f"{n} {v:+.1f}" for n, v in offsets.items())
 
 
 def whole_pass(args, argv) -> int:

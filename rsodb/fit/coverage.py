@@ -35,6 +35,7 @@ __all__ = [
     "recover_observed",
     "draw_visible_truth",
     "look_alike_turns",
+    "bias_sigmas",
     "coverage_bounds",
     "coverage_study",
     "coverage_table",
@@ -285,6 +286,12 @@ def _scores(space, result, truth, turns: Mapping[str, float]):
         sigma = 0.5 * (high - low)
         bias[name] = float((mid - _on_branch(truth[name], mid, period)) / sigma) if sigma > 0 else math.inf
     return median, p16, p84, covered, quantile, bias
+
+
+def bias_sigmas(space, result, truth: Mapping[str, float]) -> dict[str, float]:
+    """Posterior median - truth of each free parameter with a truth, in posterior sigmas (half
+    the 16-84% width; a wrapped angle's truth on the median's branch), as `Recovery.bias_sigma`."""
+    return _scores(space, result, {n: float(v) for n, v in truth.items() if n in space.names}, {})[5]
 
 
 def draw_visible_truth(posterior, rng: np.random.Generator, attempts: int = 200) -> dict[str, float]:
