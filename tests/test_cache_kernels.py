@@ -8,7 +8,10 @@ from raycast.renderer import _cache_kernels
 from raycast.renderer.rays import SUN_RADIUS_SINE, sun_fractions
 
 
-def _case(seed, n_elements, n_frames, n_directions=40, n_groups=7, density=0.7):
+def _case(seed, n_elements, n_frames, n_directions=40, n_groups=7, density=0.7, straddling=None):
+    """Random bits, nodes, directions and normals; elements with pieces in one or two groups:
+    random ones, or (a ``straddling`` fraction given) runs of elements in group order, as the
+    cache orders them, that fraction of them with a second piece in the next group."""
     rng = np.random.default_rng(seed)
     bits = rng.random((n_directions, n_elements)) < density
     sun_nodes = rng.integers(0, n_directions, (n_frames, 4))
@@ -16,10 +19,13 @@ def _case(seed, n_elements, n_frames, n_directions=40, n_groups=7, density=0.7):
     sun = rng.normal(size=(n_frames, 3)).astype(np.float32)
     obs = rng.normal(size=(n_frames, 3)).astype(np.float32)
     normals = rng.normal(size=(n_elements, 3)).astype(np.float32)
-    # Each element has pieces in one or two groups.
     rows = rng.integers(0, n_groups, 2 * n_elements)
     cols = np.repeat(np.arange(n_elements), 2)
     keep = rng.random(2 * n_elements) < 0.75
+    if straddling is not None:
+        rows[::2] = np.sort(rng.integers(0, n_groups, n_elements))
+        rows[1::2] = np.minimum(rows[::2] + 1, n_groups - 1)
+        keep[1::2] = rng.random(n_elements) < straddling
     keep[::2] = True
     area = sparse.csc_matrix(
         (rng.random(int(keep.sum())).astype(np.float32) + 0.1, (rows[keep], cols[keep])), shape=(n_groups, n_elements)
@@ -74,12 +80,36 @@ def _unit(a):
     return (a / np.linalg.norm(a, axis=1, keepdims=True)).astype(np.float32)
 
 
-@pytest.mark.parametrize("n_extra, n_groups, n_classes", [(0, 7, 4), (3, 7, 4), (3, 150, 20)])
-def test_lit_classes_sum_gated_group_areas_into_sorted_classes(n_extra, n_groups, n_classes):
+def test_byte_areas_sum_the_set_elements_of_bytes_in_one_group():
+    case = _case(3, n_elements=300, n_frames=1, straddling=0.1)
+    area = case[-1]
+    n_words = -(-300 // 64)
+    byte_slot, byte_group, byte_area = _cache_kernels.byte_areas(area.indptr, area.indices, area.data, n_words)
+    assert byte_slot.shape == (8 * n_words,) and len(byte_area) == np.count_nonzero(byte_slot >= 0)
+    element_area = np.r_[np.asarray(area.sum(axis=0)).ravel(), np.zeros(8 * 8 * n_words - 300)]
+    groups = [set(area.indices[area.indptr[e] : area.indptr[e + 1]]) if e < 300 else set() for e in range(64 * n_words)]
+    values = np.arange(256)
+    bits = (values[:, None] >> np.arange(8)) & 1  # (256, 8)
+    for b in range(8 * n_words):
+        in_byte = set().union(*groups[8 * b : 8 * b + 8])
+        assert (byte_slot[b] >= 0) == (len(in_byte) == 1), b
+        if byte_slot[b] >= 0:
+            assert byte_group[b] == in_byte.pop()
+            np.testing.assert_allclose(byte_area[byte_slot[b]], bits @ element_area[8 * b : 8 * b + 8], rtol=1e-6)
+    # Both kinds occur: runs of one group, and bytes where a group ends or an element straddles two.
+    assert 0 < np.count_nonzero(byte_slot >= 0) < 8 * n_words - 1
+
+
+@pytest.mark.parametrize(
+    "n_extra, n_groups, n_classes, straddling",
+    [(0, 7, 4, None), (3, 7, 4, None), (3, 150, 20, None), (0, 7, 4, 0.1), (1, 2, 2, 0.0)],
+)
+def test_lit_classes_sum_gated_group_areas_into_sorted_classes(n_extra, n_groups, n_classes, straddling):
     """Agreed bits, the mixed pairs' open fractions, exposed areas and factorised weights, gated
     by each group's geometric normal and summed into its class, against the same in numpy.
-    150 groups span three words of the kernel's bitmap of groups with area."""
-    case = _case(5, n_elements=130, n_frames=25, n_groups=n_groups)
+    150 groups span three words of the kernel's bitmap of groups with area. With elements in
+    long runs of one group, some words are read a byte at a time from :func:`byte_areas`' tables."""
+    case = _case(5, n_elements=130, n_frames=25, n_groups=n_groups, straddling=straddling)
     bits, sun_nodes, obs_nodes, _, _, normals, area = case
     rng = np.random.default_rng(6)
     m = len(sun_nodes)
@@ -96,6 +126,9 @@ def test_lit_classes_sum_gated_group_areas_into_sorted_classes(n_extra, n_groups
         _cache_kernels.pack_words(bits), sun_nodes, obs_nodes, sun, obs, normals
     )
     open_ = rng.choice([0.0, 0.5, 1.0], len(frames)).astype(np.float32)
+    tables = _cache_kernels.byte_areas(area.indptr, area.indices, area.data, -(-len(normals) // 64))
+    by_bytes = (tables[0].reshape(-1, 8) >= 0).all(axis=1)[:2]  # (the last word is part padding)
+    assert by_bytes.any() == (straddling == 0.0)
     out = _cache_kernels.lit_classes(
         _cache_kernels.pack_words(bits),
         sun_nodes,
@@ -103,6 +136,7 @@ def test_lit_classes_sum_gated_group_areas_into_sorted_classes(n_extra, n_groups
         area.indptr,
         area.indices,
         area.data,
+        *tables,
         frames,
         elements,
         open_,

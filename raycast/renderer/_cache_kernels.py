@@ -8,7 +8,9 @@
 * Shading classes (:func:`lit_classes`): one frame at a time, each group's lit-and-seen area
   (exposed, agreed bits, the mixed pairs' open fractions, factorised visibility), gated by its
   geometric normal and summed into its class with its normals; only the classes with light
-  are returned, so nothing of size (frames, groups) or (frames, classes) is held.
+  are returned, so nothing of size (frames, groups) or (frames, classes) is held. Elements
+  come in group order: in a word whose every byte holds elements of one group, each byte's set
+  bits add their area from a table of its 256 values (:func:`byte_areas`) in one read.
 """
 
 import math
@@ -176,6 +178,50 @@ def _gap_pairs(words, gap_ptr, gap_word, gap_mask, sun_nodes, obs_nodes, sun, ob
 
 
 @njit(cache=True, nogil=True)
+def byte_areas(ptr, group, area, n_words):
+    """Tables for :func:`lit_classes`: each byte of bit-held elements (8 at a time, byte
+    ``8 * w + b`` holding bits ``8 b .. 8 b + 7`` of word ``w``) whose pieces all lie in one group.
+
+    Returns
+    -------
+    byte_slot : (8 w,) int32, the byte's row of ``byte_area``, or -1 where its elements' pieces
+        lie in more than one group (or where it holds none).
+    byte_group : (8 w,) int64, that one group.
+    byte_area : (s, 256) float32, row s: the area of the byte's elements set in each value of it.
+    """
+    n_elements, n_bytes = len(ptr) - 1, 8 * n_words
+    byte_slot = np.full(n_bytes, -1, dtype=np.int32)
+    byte_group = np.zeros(n_bytes, dtype=np.int64)
+    element_area = np.zeros(8)
+    rows = 0
+    for b in range(n_bytes):
+        first, end = min(8 * b, n_elements), min(8 * b + 8, n_elements)
+        if ptr[first] == ptr[end]:
+            continue
+        one_group = True
+        for k in range(ptr[first], ptr[end]):
+            one_group = one_group and group[k] == group[ptr[first]]
+        if one_group:
+            byte_slot[b], byte_group[b] = rows, group[ptr[first]]
+            rows += 1
+    byte_area = np.zeros((rows, 256), dtype=np.float32)
+    for b in range(n_bytes):
+        slot = byte_slot[b]
+        if slot < 0:
+            continue
+        for i in range(8):
+            e = 8 * b + i
+            element_area[i] = 0.0
+            if e < n_elements:
+                for k in range(ptr[e], ptr[e + 1]):
+                    element_area[i] += area[k]
+        for value in range(1, 256):
+            low = value & -value  # the value's lowest bit, added to the value without it
+            byte_area[slot, value] = byte_area[slot, value ^ low] + element_area[_lowest_bit(np.uint64(low))]
+    return byte_slot, byte_group, byte_area
+
+
+@njit(cache=True, nogil=True)
 def lit_classes(
     words,
     sun_nodes,
@@ -183,6 +229,9 @@ def lit_classes(
     ptr,
     group,
     area,
+    byte_slot,
+    byte_group,
+    byte_area,
     pair_frames,
     pair_elements,
     pair_open,
@@ -200,7 +249,8 @@ def lit_classes(
 
     A group's lit-and-seen area in a frame is its exposed area, plus its bit-held elements'
     pieces where all eight nodes agree (``words``, ``sun_nodes``, ``obs_nodes``; ``ptr``,
-    ``group``, ``area`` CSC-style as in :func:`mixed_pairs`), plus ``pair_open`` times the
+    ``group``, ``area`` CSC-style as in :func:`mixed_pairs`; ``byte_slot``, ``byte_group``,
+    ``byte_area`` from :func:`byte_areas`), plus ``pair_open`` times the
     pieces of the mixed pairs (``pair_frames`` in frame order, ``pair_elements``), plus
     ``extra_weight`` (m, k) on ``extra_groups`` (k,) (the factorised groups). It is gated by
     the group's geometric normal (max(n_geo . obs, 0) and the part of the solar disk above its
@@ -236,6 +286,12 @@ def lit_classes(
         if area_exposed[g] != 0.0:
             exposed[g >> 6] |= one << np.uint64(g & 63)
     touched = exposed.copy()
+    # Words read byte by byte: those whose every byte lies in one group (the last word's bytes
+    # past the elements have no bits set, so their slot -1 is never read).
+    by_bytes = np.ones(n_words, dtype=np.bool_)
+    for b in range(8 * n_words):
+        if byte_slot[b] < 0 and 8 * b < len(ptr) - 1:
+            by_bytes[b // 8] = False
     pair = 0
     run_group, run_area = 0, 0.0
     for f in range(m):
@@ -252,19 +308,35 @@ def lit_classes(
                 & words[o2, w]
                 & words[o3, w]
             )
-            base = 64 * w
-            while both != zero:
-                e = base + _lowest_bit(both)
-                both &= both - one
-                # Elements come in group order: a run of one group's pieces is summed in a
-                # register (adding each to memory waits on the previous add to the same group).
-                for k in range(ptr[e], ptr[e + 1]):
-                    if group[k] == run_group:
-                        run_area += area[k]
-                    else:
-                        weight[run_group] += run_area
-                        touched[run_group >> 6] |= one << np.uint64(run_group & 63)
-                        run_group, run_area = group[k], area[k]
+            if both == zero:
+                continue
+            # Elements come in group order: a run of one group's pieces is summed in a register
+            # (adding each to memory waits on the previous add to the same group).
+            if not by_bytes[w]:
+                while both != zero:
+                    e = 64 * w + _lowest_bit(both)
+                    both &= both - one
+                    for k in range(ptr[e], ptr[e + 1]):
+                        if group[k] == run_group:
+                            run_area += area[k]
+                        else:
+                            weight[run_group] += run_area
+                            touched[run_group >> 6] |= one << np.uint64(run_group & 63)
+                            run_group, run_area = group[k], area[k]
+                continue
+            # A word whose every byte lies in one group: each byte's set bits add their area
+            # from its table in one read.
+            for b in range(8):
+                byte = (both >> np.uint64(8 * b)) & np.uint64(255)
+                if byte == zero:
+                    continue
+                g, value = byte_group[8 * w + b], byte_area[byte_slot[8 * w + b], byte]
+                if g == run_group:
+                    run_area += value
+                else:
+                    weight[run_group] += run_area
+                    touched[run_group >> 6] |= one << np.uint64(run_group & 63)
+                    run_group, run_area = g, value
         if run_area != 0.0:
             weight[run_group] += run_area
             touched[run_group >> 6] |= one << np.uint64(run_group & 63)

@@ -540,6 +540,19 @@ def _ray_origins(pose, edge_weights):
     return per_pose[key]
 
 
+_BYTE_AREAS = weakref.WeakKeyDictionary()
+
+
+def _byte_areas(pose):
+    """The pose's tables of bytes of bit-held elements in one group
+    (:func:`raycast.renderer._cache_kernels.byte_areas`), made on first use in each process
+    (a few milliseconds; 128 bytes an element at most, so they are not stored)."""
+    if pose not in _BYTE_AREAS:
+        area = pose.raw_area
+        _BYTE_AREAS[pose] = _cache_kernels.byte_areas(area.indptr, area.indices, area.data, pose.raw_bits.shape[1])
+    return _BYTE_AREAS[pose]
+
+
 def _raycaster(pose):
     """The pose's Open3D scene, built on first use in each process (it does not pickle)."""
     if pose not in _RAYCASTERS:
@@ -661,6 +674,7 @@ def _lit_classes(pose, frames, grid_size, pairs, occluded, k):
         area.indptr,
         area.indices,
         area.data,
+        *_byte_areas(pose),
         pairs.frames,
         pairs.elements,
         open_,
