@@ -206,16 +206,25 @@ def test_articulation_axis_interpolates_between_poses():
     assert rms_mag(cache.intensity(sun, obs, pitch_deg=12.0), node) < 0.01
 
 
-@pytest.mark.parametrize("m, threads", [(1, 2), (63, 2), (64, 2), (150, 2), (600, 3), (4640, 2), (300, 1)])
-def test_frame_batches_cover_the_frames_in_order(m, threads):
-    batches = cache_module._frame_batches(m, threads)
+@pytest.mark.parametrize(
+    "m, threads, chunk",
+    [(1, 2, 256), (63, 2, 256), (64, 2, 256), (150, 2, 256), (600, 3, 256), (4640, 2, 1024), (300, 1, 256)],
+)
+def test_frame_batches_cover_the_frames_in_order(m, threads, chunk):
+    batches = cache_module._frame_batches(m, threads, chunk)
     assert [b.start for b in batches[1:]] == [b.stop for b in batches[:-1]]  # contiguous, in order
     assert batches[0].start == 0 and batches[-1].stop == m
     sizes = [b.stop - b.start for b in batches]
-    assert max(sizes) <= cache_module._FRAMES_PER_CHUNK
+    assert max(sizes) <= chunk
     # As many batches as threads where each gets enough frames; no more than the chunks need.
-    expected = max(-(-m // cache_module._FRAMES_PER_CHUNK), min(threads, m // cache_module._MIN_FRAMES_PER_THREAD), 1)
+    expected = max(-(-m // chunk), min(threads, m // cache_module._MIN_FRAMES_PER_THREAD), 1)
     assert len(batches) == expected
+
+
+@pytest.mark.parametrize("n_classes, frames", [(1, 1024), (357, 1024), (1528, 686), (57091, 256)])
+def test_batches_hold_at_most_a_million_lit_rows_within_bounds(n_classes, frames):
+    # TOPEX (357 classes) in batches of 1 024 frames; the paper mesh (1 528) 686; all-Glossy 256.
+    assert cache_module._chunk_frames(n_classes) == frames
 
 
 def test_threads_give_the_one_thread_light_curve(monkeypatch):
@@ -228,8 +237,8 @@ def test_threads_give_the_one_thread_light_curve(monkeypatch):
     monkeypatch.setattr(cache_module, "_threads", lambda: 1)
     one = cache.intensity(sun, obs)
     monkeypatch.setattr(cache_module, "_threads", lambda: 2)
-    monkeypatch.setattr(cache_module, "_FRAMES_PER_CHUNK", 128)
-    assert len(cache_module._frame_batches(300, 2)) == 3
+    monkeypatch.setattr(cache_module, "_FRAMES_PER_CHUNK", (128, 128))
+    assert len(cache_module._frame_batches(300, 2, cache_module._chunk_frames(cache.poses[0].n_classes))) == 3
     np.testing.assert_array_equal(cache.intensity(sun, obs), one)
     assert np.count_nonzero(one) > 250
     origins = cache_module._ray_origins(cache.poses[0], cache_module._subpoint_weights(1))
@@ -249,7 +258,8 @@ def test_a_pool_worker_shades_with_one_thread(monkeypatch):
     cache = SceneCache.build(scene, grid_size=8)
     rng = np.random.default_rng(3)
     sun, obs = unit(rng.normal(size=(600, 3)) + [2.0, 0.0, 0.5]), unit(rng.normal(size=(600, 3)) + [2.0, 0.0, 0.5])
-    assert len(cache_module._frame_batches(600, 1)) == 3
+    monkeypatch.setattr(cache_module, "_FRAMES_PER_CHUNK", (256, 256))
+    assert len(cache_module._frame_batches(600, 1, cache_module._chunk_frames(cache.poses[0].n_classes))) == 3
     assert np.all(np.isfinite(cache.intensity(sun, obs)))
     monkeypatch.delenv("OMP_NUM_THREADS")
     assert cache_module._threads() >= 1
