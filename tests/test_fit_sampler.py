@@ -177,6 +177,26 @@ def test_multistart_start_puts_every_walker_in_the_true_mode_of_a_multimodal_pos
     np.testing.assert_allclose(run.chain[-1, :, 1], TRUTH["spin_phase_deg"], atol=3.0)
 
 
+@pytest.mark.parametrize("init", ["search", "multistart"])
+def test_walkers_start_at_the_full_posteriors_mode_not_the_coarse_searchs(tmp_path, init):
+    """A coarse search posterior whose mode lies ~9 posterior widths from the full one's (its
+    data drawn with the phase 6 deg off): the settling Nelder-Mead moves the start there."""
+    posterior = make_posterior()
+    coarse = make_posterior(n=40, seed=2)
+    shifted = coarse.model.magnitudes({**TRUTH, "spin_phase_deg": 46.0}) + 12.3
+    coarse = Posterior(coarse.space, coarse.model, GaussianLikelihood(shifted, np.full(40, 0.05)))
+    search = dict(search_maxiter=20, search_popsize=6, search_starts=64, search_polish=2, search_polish_evals=150)
+    starts = {}
+    for settle_evals in (0, 300):
+        settings = SamplerSettings(n_walkers=8, n_steps=2, init=init, seed=4, settle_evals=settle_evals, **search)
+        run = run_sampler(posterior, settings, tmp_path / f"{settle_evals}.h5", progress=False, search_posterior=coarse)
+        starts[settle_evals] = np.median(run.chain[0, :, 1]), run.init
+    # The full posterior's phase width is ~0.7 deg (sigma / (A sqrt(n / 2)) radians).
+    assert abs(starts[0][0] - 46.0) < 1.0 and "settle_evaluations" not in starts[0][1]
+    assert abs(starts[300][0] - TRUTH["spin_phase_deg"]) < 2.0
+    assert 0 < starts[300][1]["settle_evaluations"] <= 300 and starts[300][1]["settle_log_prob_gain"] > 10.0
+
+
 def test_posterior_widths_match_the_fisher_matrix(tmp_path):
     posterior = make_posterior()
     settings = SamplerSettings(n_walkers=16, n_steps=600, init="search", search_maxiter=20, search_popsize=6, seed=3)
