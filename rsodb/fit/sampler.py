@@ -568,7 +568,8 @@ def _settled(best: np.ndarray, posterior, settings: SamplerSettings, evaluator: 
         },
     )
     settled = space.wrap(found.x) if found.fun < start_cost else best
-    gain = max(start_cost - float(found.fun), 0.0) if start_cost < _IMPOSSIBLE else math.inf
+    # (None where the coarse best had no full posterior at all: any finite point is a gain.)
+    gain = max(start_cost - float(found.fun), 0.0) if start_cost < _IMPOSSIBLE else None
     return settled, {"settle_evaluations": int(found.nfev), "settle_log_prob_gain": gain}
 
 
