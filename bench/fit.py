@@ -127,7 +127,7 @@ def whole_pass(args, argv) -> int:
         record_ = cycles_config(first["axis"], args)  # the start: --init (multistart, as the coverage study)
         record_["sampler"]["processes"] = args.processes
         what = f"the paper's COSMOS 2502 mesh on a {len(observed)}-sample Cycles pass ({first['file']})"
-    record_["sampler"].update(until_converged=args.until_converged, time_limit_s=args.time_limit_s)
+    record_["sampler"].update(until_converged=args.until_converged, time_limit_s=args.time_limit_s, moves=args.moves)
     config = FitConfig.from_dict(record_)
     target = WHOLE_TARGETS_S[args.pass_name] * (3 if args.until_converged else 1)
     with tempfile.TemporaryDirectory() as scratch:
@@ -160,7 +160,7 @@ def whole_pass(args, argv) -> int:
     section = f"""
 ## Whole-pass fit speed: {args.pass_name}, {mode} ({today()}, bench/fit.py)
 
-{what}; {problem.selection.description}; {n_sub_text}; {args.walkers} walkers x {result.n_steps} steps after a global
+{what}; {problem.selection.description}; {n_sub_text}; {args.walkers} walkers x {result.n_steps} steps ({args.moves} moves) after a global
 search, {args.processes or os.cpu_count()} processes, load average {load[0]:.1f} at the end (shared machine).
 Wall time {fit_wall:.0f} s ({fit_wall / 60:.1f} min) against a target of {target / 60:.0f} min: {met}.
 Sampler: {result.verdict.rstrip(".")}. Residual RMS over every sample of the window {result.residual_rms_mag:.3f} mag.
@@ -192,6 +192,9 @@ def main(argv=None) -> int:
     parser.add_argument("--walkers", type=int, default=20)
     parser.add_argument("--n-sub", type=int, default=2, help="exposure sub-samples in the fit (default 2)")
     parser.add_argument("--processes", type=int, default=0, help="0 = one per core")
+    parser.add_argument(
+        "--moves", choices=("stretch", "de"), default="stretch", help="emcee's moves (whole passes; default stretch)"
+    )
     parser.add_argument(
         "--init",
         default="multistart",
