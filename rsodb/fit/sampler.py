@@ -516,11 +516,10 @@ def init_from_multistart(
 ) -> tuple[np.ndarray, dict]:
     """Walkers in a small ball around the best point of a multi-start search (`_search_multistart`)."""
     best, best_cost, search_evaluations, agreeing = _search_multistart(posterior, settings, rng, evaluator)
-    start, settling = _settled(best, posterior, settings, evaluator)
-    positions, evaluations = _walkers_around(start, posterior, settings, rng, evaluator)
+    positions, evaluations, settling = _walkers_around_settled(best, posterior, settings, rng, evaluator)
     return positions, {
         "method": "multistart",
-        "evaluations": search_evaluations + settling.get("settle_evaluations", 0) + evaluations,
+        "evaluations": search_evaluations + evaluations,
         "search_best_log_prob": float(-best_cost),
         "search_best": best.tolist(),
         "search_starts_agreeing": int(agreeing),
@@ -589,6 +588,16 @@ def _walkers_around(
     return _finite_or_redraw(evaluator, ball, settings.n_walkers, "around the search's best point")
 
 
+def _walkers_around_settled(
+    best: np.ndarray, posterior, settings: SamplerSettings, rng: np.random.Generator, evaluator: _Evaluator
+) -> tuple[np.ndarray, int, dict]:
+    """`_walkers_around` the search's best point once `_settled` on the full posterior;
+    (positions, evaluations of both, the settling's facts for the init record)."""
+    start, settling = _settled(best, posterior, settings, evaluator)
+    positions, evaluations = _walkers_around(start, posterior, settings, rng, evaluator)
+    return positions, evaluations + settling.get("settle_evaluations", 0), settling
+
+
 def init_from_search(
     posterior, settings: SamplerSettings, rng: np.random.Generator, evaluator: _Evaluator
 ) -> tuple[np.ndarray, dict]:
@@ -599,15 +608,8 @@ def init_from_search(
     and the ball is checked there.
     """
     result, best, best_cost, polish_evaluations = _search(posterior, settings, rng, evaluator)
-    start, settling = _settled(best, posterior, settings, evaluator)
-    positions, evaluations = _walkers_around(start, posterior, settings, rng, evaluator)
-    info = _search_info(
-        "search",
-        result,
-        best,
-        best_cost,
-        int(result.nfev) + polish_evaluations + settling.get("settle_evaluations", 0) + evaluations,
-    )
+    positions, evaluations, settling = _walkers_around_settled(best, posterior, settings, rng, evaluator)
+    info = _search_info("search", result, best, best_cost, int(result.nfev) + polish_evaluations + evaluations)
     return positions, {**info, **settling}
 
 
