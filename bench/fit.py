@@ -193,7 +193,7 @@ def main(argv=None) -> int:
     parser.add_argument("--n-sub", type=int, default=2, help="exposure sub-samples in the fit (default 2)")
     parser.add_argument("--processes", type=int, default=0, help="0 = one per core")
     parser.add_argument(
-        "--moves", choices=("stretch", "de"), default="stretch", help="emcee's moves (whole passes; default stretch)"
+        "--moves", choices=("de", "stretch"), default="de", help="emcee's moves (whole passes; default de)"
     )
     parser.add_argument(
         "--init",

@@ -87,7 +87,7 @@ def config_record(
     steps: int,
     walkers: int,
     init: str = "search",
-    moves: str = "stretch",
+    moves: str = "de",
     search_popsize: int = 15,
     search_maxiter: int = 100,
 ) -> dict:
@@ -119,6 +119,7 @@ def cycles_config(axis: str, args=None) -> dict:
     sampler = {
         "n_walkers": args.walkers,
         "n_steps": args.steps,
+        "moves": args.moves,
         "until_converged": args.until_converged,
         "time_limit_s": args.time_limit_s,
         "search_points": 120,
@@ -622,7 +623,7 @@ Cycles noise (the two seeds' standard error) is above {CYCLES_NOISE_LIMIT_MAG} m
 {CYCLES_REFINE}x the samples, up to {CYCLES_REFINE_ROUNDS} times ({refined_text}); the noise left,
 {np.median([r["cycles"]["noise_mag_rms"] for r in records]):.4f} mag RMS per frame (median over passes; max
 {max(r["cycles"]["noise_mag_max"] for r in records):.4f}), is added in quadrature to each sample's quoted error. Fit: jitter free on 0-0.1 mag, {args.walkers} walkers,
-{args.steps} steps{" until converged (at most)" if args.until_converged else ""}, global search first ({search}){limits}. The fits took
+{args.steps} steps{" until converged (at most)" if args.until_converged else ""} ({args.moves} moves), global search first ({search}){limits}. The fits took
 {fit_minutes:.0f} min together, {elapsed / 60:.0f} min of wall time on {os.cpu_count()} cores in the last run (load average
 {load[0]:.1f} at the end).
 
@@ -698,7 +699,7 @@ def command_line() -> argparse.ArgumentParser:
     parser.add_argument("--init", default="search", help="walker start: search | multistart | population | prior")
     parser.add_argument("--search-starts", type=int, default=1024, help="multistart: prior points screened")
     parser.add_argument("--search-polish", type=int, default=8, help="multistart: best points refined")
-    parser.add_argument("--moves", default="stretch", help="emcee moves: stretch | de")
+    parser.add_argument("--moves", default="de", help="emcee moves: de | stretch")
     parser.add_argument("--search-popsize", type=int, default=15, help="search population per parameter (default 15)")
     parser.add_argument("--search-maxiter", type=int, default=100, help="search generations (default 100)")
     parser.add_argument("--processes", type=int, default=None)

@@ -88,9 +88,9 @@ def main(argv=None) -> int:
     parser.add_argument("--passes", type=int, nargs="+", default=list(range(6)))
     parser.add_argument(
         "--evolution",
-        nargs="+",
+        nargs="*",
         default=["8x30", "15x50"],
-        help="differential-evolution budgets, POPSIZExGENERATIONS (8x30: the coverage run's; 15x50: more evaluations than the multi-start)",
+        help="differential-evolution budgets, POPSIZExGENERATIONS (8x30: the coverage run's; 15x50: more evaluations than the multi-start); none: the multi-start alone",
     )
     parser.add_argument("--no-multistart", action="store_true")
     parser.add_argument("--passes-dir", default=str(Path.home() / ".cache" / "rsodb" / "cycles_passes"))

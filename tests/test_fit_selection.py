@@ -92,6 +92,31 @@ def test_bins_average_flux_and_span_their_samples(topex):
     assert t_mid == topex.time_utc[first[0]] + (topex.time_utc[first[-1]] - topex.time_utc[first[0]]) // 2
 
 
+def test_a_point_model_bins_error_holds_a_glint_but_not_a_ramp(topex):
+    """The global search compares its model at each bin's mid-time: a bin whose samples bend (a
+    glint) adds the mid-time's difference from the bin's mean to its error; a straight ramp adds
+    nothing (its middle is its mean)."""
+    n = len(topex)
+    mag = 8.0 + 0.002 * np.arange(n)  # a ramp, 0.01 mag over a bin of 5
+    glint = 2 * 5 + 1  # the second sample of the third bin
+    mag[glint] -= 3.0
+    observed = topex.replace(mag=mag, mag_corrected=None, mag_err=np.full(n, 0.01))
+    selection = select_samples(observed, DataConfig(max_points=n // 5), (200.0, 220.0), "ramp")
+    assert selection.bin_size == 5 and np.array_equal(selection.groups[2], np.arange(10, 15))
+    mean, plain = selection.magnitudes(observed)
+    point_mean, point = selection.magnitudes(observed, point_model=True)
+    np.testing.assert_array_equal(point_mean, mean)
+    ramp = np.ones(selection.n, dtype=bool)
+    ramp[2] = False
+    np.testing.assert_array_equal(point[ramp], plain[ramp])
+    # The glint's bin: its mean is 1.47 mag brighter than its middle sample (13 + 4 of 5 flux
+    # units); the error grows to that difference, less the two magnitudes' noise.
+    difference = mean[2] - mag[12]
+    assert difference == pytest.approx(-2.5 * np.log10((10**1.2 + 4) / 5), abs=0.01)
+    expected = np.sqrt(difference**2 - 0.01**2)
+    assert point[2] == pytest.approx(expected, rel=1e-3) and point[2] > 100 * plain[2]
+
+
 @pytest.mark.slow
 def test_main_jobs_quick_fit_on_a_pass_strobed_by_the_old_stride(topex, tmp_path):
     """A light curve whose period equals the old quick fit's 9.47 s stride: the quick fit's samples

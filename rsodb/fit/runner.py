@@ -180,7 +180,7 @@ class FitProblem:
                 reference_range_km(observed),
                 epoch_s,
             )
-            mag, err = chosen.magnitudes(observed, config.data.mag_err_floor)
+            mag, err = chosen.magnitudes(observed, config.data.mag_err_floor, point_model=n_sub == 1)
             likelihood = make_likelihood(config.likelihood.kind, mag, err, config.likelihood.offset)
             return Posterior(space, model, likelihood)
 

@@ -219,8 +219,19 @@ class Selection:
         t_s = observed.t_s[self.groups]
         return float(np.median(t_s[:, -1] - t_s[:, 0])) + float(observed.exposure_s)
 
-    def magnitudes(self, observed, mag_err_floor: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-        """(mag (m,), mag_err (m,)) of each bin: the magnitude of the mean flux and its error."""
+    def magnitudes(
+        self, observed, mag_err_floor: float = 0.0, point_model: bool = False
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(mag (m,), mag_err (m,)) of each bin: the magnitude of the mean flux and its error.
+
+        ``point_model``: the model is compared at each bin's mid-time only, not integrated over
+        the bin (the global search's coarse posterior). Where the light curve bends within a
+        bin (a glint, a sharp edge) its value at the mid-time differs from the bin's mean, so the
+        error also holds that difference as the bin's own samples show it (the mean's magnitude
+        against the middle sample's, beyond their noise): without it, one glint smeared over a
+        bin outweighs every other bin and the true state scores far below wrong ones. A straight
+        ramp adds nothing (its middle is its mean).
+        """
         mag = observed.best_mag[self.groups]
         err = np.maximum(observed.mag_err[self.groups], mag_err_floor)
         if self.bin_size == 1:
@@ -228,8 +239,15 @@ class Selection:
         flux = 10.0 ** (-0.4 * (mag - mag[:, :1]))
         mean = flux.mean(axis=1)
         flux_err = flux * err * (0.4 * math.log(10.0))
-        bin_err = np.sqrt(np.sum(flux_err**2, axis=1)) / self.bin_size
-        return mag[:, 0] - 2.5 * np.log10(mean), bin_err / mean / (0.4 * math.log(10.0))
+        bin_err = np.sqrt(np.sum(flux_err**2, axis=1)) / self.bin_size / mean / (0.4 * math.log(10.0))
+        mean_mag = mag[:, 0] - 2.5 * np.log10(mean)
+        if point_model:
+            middle = (self.bin_size - 1) // 2, self.bin_size // 2
+            mid_mag = 0.5 * (mag[:, middle[0]] + mag[:, middle[1]])
+            mid_var = 0.25 * (err[:, middle[0]] ** 2 + err[:, middle[1]] ** 2)
+            beyond_noise = (mean_mag - mid_mag) ** 2 - mid_var - bin_err**2
+            bin_err = np.sqrt(bin_err**2 + np.maximum(beyond_noise, 0.0))
+        return mean_mag, bin_err
 
 
 def _runs(t_s: np.ndarray) -> list[np.ndarray]:
