@@ -297,12 +297,14 @@ def _worker_cost(theta: np.ndarray) -> float:
 
 @dataclass(frozen=True, eq=False)
 class _Cost:
-    """-ln p for a minimiser, in this process."""
+    """-ln p for a minimiser, in this process; ``wrap``: phases wrapped into their turn first (a
+    Nelder-Mead simplex steps over a phase's wrap; other bounds are the prior's)."""
 
     posterior: Any
+    wrap: bool = False
 
     def __call__(self, theta):
-        value = self.posterior(theta)
+        value = self.posterior(self.posterior.space.wrap(theta) if self.wrap else theta)
         return -value if math.isfinite(value) else _IMPOSSIBLE
 
 
@@ -487,12 +489,8 @@ def _search_multistart(posterior, settings: SamplerSettings, rng: np.random.Gene
     costs = np.array(list(evaluator.map(evaluator.cost, points)))
     if not np.any(costs < _IMPOSSIBLE):
         raise RuntimeError("the global search found no point where the posterior is non-zero; widen the priors")
-    cost = _Cost(evaluator.search_posterior)
+    cost, wrapped_cost = _Cost(evaluator.search_posterior), _Cost(evaluator.search_posterior, wrap=True)
     evaluations = len(points)
-
-    def wrapped_cost(theta):  # Nelder-Mead steps over a phase's wrap; other bounds are the prior's
-        return cost(space.wrap(theta))
-
     best, best_cost, reached = None, math.inf, []
     for start in points[np.argsort(costs)[: settings.search_polish]]:
         found = minimize(
@@ -551,12 +549,12 @@ def _settled(best: np.ndarray, posterior, settings: SamplerSettings, evaluator: 
     if settings.settle_evals == 0 or evaluator.search_posterior is posterior:
         return best, {}
     space = posterior.space
-    cost = _Cost(posterior)
+    cost = _Cost(posterior, wrap=True)
     start_cost = cost(best)
     step = (space.bounds[:, 1] - space.bounds[:, 0]) * _SETTLE_STEP_FRACTION
     simplex = np.vstack([best, best + np.diag(step)])
     found = minimize(
-        lambda theta: cost(space.wrap(theta)),
+        cost,
         best,
         method="Nelder-Mead",
         options={
