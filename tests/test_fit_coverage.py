@@ -26,9 +26,9 @@ CONFIG = {
         "precession_period_s": 700.0,
         "jitter_mag": 0.0,
     },
-    # Walkers start around the search's best point and move with the stretch move. Started from
-    # the search's final population instead (init "population", DE moves), walkers sitting in
-    # separate local modes accepted ~2% of proposals and stayed where they started.
+    # Walkers start around the search's best point (the settled start) and move with the default
+    # DE moves. Started from the search's final population instead (init "population"), walkers
+    # sitting in separate local modes accepted ~2% of proposals and stayed where they started.
     "sampler": {"n_walkers": 16, "n_steps": 800, "search_popsize": 10, "search_maxiter": 60, "init": "search"},
 }
 
