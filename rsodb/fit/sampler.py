@@ -106,7 +106,9 @@ class SamplerSettings:
     search_starts, search_polish, search_polish_evals : int
         ``init = "multistart"``: the coarse posterior is evaluated at ``search_starts`` points of
         a scrambled Sobol sequence over the priors, and the ``search_polish`` best of them are
-        each refined by a Nelder-Mead search of at most ``search_polish_evals`` evaluations.
+        each refined by a Nelder-Mead search of at most ``search_polish_evals`` evaluations
+        (8192 and 16 by default: on the two Cycles passes whose search had failed, 1024 and 8
+        found neither true mode, 4096 and 16 one, 8192 and 16 both; docs/fitting.md).
     search_points : int
         The search runs on at most this many samples, evenly spread, without exposure
         sub-samples (a coarse posterior ~10x cheaper than the full one); the walkers then
@@ -145,8 +147,8 @@ class SamplerSettings:
     search_popsize: int = 15
     search_points: int = 60
     settle_evals: int = 300
-    search_starts: int = 1024
-    search_polish: int = 8
+    search_starts: int = 8192
+    search_polish: int = 16
     search_polish_evals: int = 400
     ball_fraction: float = 1e-3
     processes: int = 1
