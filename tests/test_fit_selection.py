@@ -110,11 +110,12 @@ def test_a_point_model_bins_error_holds_a_glint_but_not_a_ramp(topex):
     ramp[2] = False
     np.testing.assert_array_equal(point[ramp], plain[ramp])
     # The glint's bin: its mean is 1.47 mag brighter than its middle sample (13 + 4 of 5 flux
-    # units); the error grows to that difference, less the two magnitudes' noise.
+    # units); the error grows to that difference, less the middle sample's noise (0.01 mag,
+    # one sample: the bin of 5 has one middle) and the mean's (its own error, added back).
     difference = mean[2] - mag[12]
     assert difference == pytest.approx(-2.5 * np.log10((10**1.2 + 4) / 5), abs=0.01)
     expected = np.sqrt(difference**2 - 0.01**2)
-    assert point[2] == pytest.approx(expected, rel=1e-3) and point[2] > 100 * plain[2]
+    assert point[2] == pytest.approx(expected, rel=1e-9) and point[2] > 100 * plain[2]
 
 
 @pytest.mark.slow

@@ -242,9 +242,10 @@ class Selection:
         bin_err = np.sqrt(np.sum(flux_err**2, axis=1)) / self.bin_size / mean / (0.4 * math.log(10.0))
         mean_mag = mag[:, 0] - 2.5 * np.log10(mean)
         if point_model:
-            middle = (self.bin_size - 1) // 2, self.bin_size // 2
-            mid_mag = 0.5 * (mag[:, middle[0]] + mag[:, middle[1]])
-            mid_var = 0.25 * (err[:, middle[0]] ** 2 + err[:, middle[1]] ** 2)
+            # The middle sample (odd bins) or the mean of the two middle ones (even bins).
+            middle = sorted({(self.bin_size - 1) // 2, self.bin_size // 2})
+            mid_mag = mag[:, middle].mean(axis=1)
+            mid_var = np.sum(err[:, middle] ** 2, axis=1) / len(middle) ** 2
             beyond_noise = (mean_mag - mid_mag) ** 2 - mid_var - bin_err**2
             bin_err = np.sqrt(bin_err**2 + np.maximum(beyond_noise, 0.0))
         return mean_mag, bin_err
