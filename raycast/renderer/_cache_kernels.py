@@ -530,3 +530,122 @@ def clear_bits(bits, element, direction, occluded):
         if occluded[r]:
             d = direction[r]
             bits[element[r], d >> 3] &= np.uint8(255 - (1 << (7 - (d & 7))))
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _cube_cell(x, y, z, n):
+    """The first of the four cube-map nodes around direction (x, y, z) (grid size n), as
+    ``raycast.renderer.cache.cube_grid_weights`` numbers them; the others are +(n+1), +1, +(n+2)."""
+    ax, ay, az = abs(x), abs(y), abs(z)
+    if ax >= ay and ax >= az:
+        axis, major, a, b = 0, x, y, z
+    elif ay >= az:
+        axis, major, a, b = 1, y, z, x
+    else:
+        axis, major, a, b = 2, z, x, y
+    face = 2 * axis + (1 if major < 0.0 else 0)
+    scale = n / (0.5 * math.pi)
+    ia = min(max(int(math.floor((math.atan(a / abs(major)) + 0.25 * math.pi) * scale)), 0), n - 1)
+    ib = min(max(int(math.floor((math.atan(b / abs(major)) + 0.25 * math.pi) * scale)), 0), n - 1)
+    return face * (n + 1) * (n + 1) + ia * (n + 1) + ib
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _all_blocked(words, first, n, w, bit):
+    """Whether an element's bits (word w, mask bit) are clear at the four nodes of a cell."""
+    return not (
+        words[first, w] & bit
+        or words[first + n + 1, w] & bit
+        or words[first + 1, w] & bit
+        or words[first + n + 2, w] & bit
+    )
+
+
+@njit(cache=True, nogil=True)
+def slit_candidates(words, origins, normals, middles, grid_size, elements, segments):
+    """The (element, slit segment) pairs whose segment's middle (``middles`` (s, 3)) lies above
+    the element's plane in a direction whose cell has its four nodes blocked in the element's
+    bits: those whose ray through the middle escapes may see out through the slit. Written to
+    ``elements`` and ``segments``, element-major; returns how many there were (more than the
+    arrays' size: call again with room for all)."""
+    n = grid_size
+    capacity = len(elements)
+    count = 0
+    one = np.uint64(1)
+    for e in range(len(origins)):
+        w = e >> 6
+        bit = one << np.uint64(e & 63)
+        for s in range(len(middles)):
+            x, y, z = middles[s, 0] - origins[e, 0], middles[s, 1] - origins[e, 1], middles[s, 2] - origins[e, 2]
+            if x * normals[e, 0] + y * normals[e, 1] + z * normals[e, 2] <= 0.0:
+                continue
+            if _all_blocked(words, _cube_cell(x, y, z, n), n, w, bit):
+                if count < capacity:
+                    elements[count], segments[count] = e, s
+                count += 1
+    return count
+
+
+@njit(cache=True, nogil=True)
+def slit_gap_nodes(
+    words, origins, normals, segments, grid_size, step_rad, pair_elements, pair_segments, nodes, elements
+):
+    """The gap pairs (node, element) of the (element, segment) pairs that see out through a slit.
+
+    Each of the segment's lines (``segments`` (s, 3, 2, 3): near side, middle, far side of the
+    gap) is followed in directions at most ``step_rad`` apart as the element (``origins``,
+    unit ``normals`` (e, 3)) sees them; where a direction above the element's plane lies in a
+    cell whose four nodes are blocked in the element's bits (``words`` (d, w) uint64), the four
+    are gap nodes. Pairs come element-major; each (node, element) is written once, to
+    ``nodes`` and ``elements``; returns how many there were (more than the arrays' size: call
+    again with room for all).
+    """
+    n = grid_size
+    capacity = len(nodes)
+    count = 0
+    one = np.uint64(1)
+    marked = np.zeros(words.shape[0], dtype=np.bool_)
+    touched = np.empty(words.shape[0], dtype=np.int64)
+    n_touched = 0
+    current = -1
+    for p in range(len(pair_elements)):
+        e, s = pair_elements[p], pair_segments[p]
+        if e != current:
+            for t in range(n_touched):
+                marked[touched[t]] = False
+            n_touched = 0
+            current = e
+        w = e >> 6
+        bit = one << np.uint64(e & 63)
+        ox, oy, oz = origins[e, 0], origins[e, 1], origins[e, 2]
+        nx, ny, nz = normals[e, 0], normals[e, 1], normals[e, 2]
+        for line in range(segments.shape[1]):
+            ax, ay, az = segments[s, line, 0, 0] - ox, segments[s, line, 0, 1] - oy, segments[s, line, 0, 2] - oz
+            bx, by, bz = segments[s, line, 1, 0] - ox, segments[s, line, 1, 1] - oy, segments[s, line, 1, 2] - oz
+            la = math.sqrt(ax * ax + ay * ay + az * az)
+            lb = math.sqrt(bx * bx + by * by + bz * bz)
+            if la == 0.0 or lb == 0.0:
+                continue
+            cosine = (ax * bx + ay * by + az * bz) / (la * lb)
+            steps = max(1, int(math.ceil(math.acos(min(max(cosine, -1.0), 1.0)) / step_rad)))
+            last = -1
+            for j in range(steps + 1):
+                t = j / steps
+                x, y, z = ax + t * (bx - ax), ay + t * (by - ay), az + t * (bz - az)
+                if x * nx + y * ny + z * nz <= 0.0:
+                    continue
+                first = _cube_cell(x, y, z, n)
+                if first == last:
+                    continue
+                last = first
+                if not _all_blocked(words, first, n, w, bit):
+                    continue
+                for node in (first, first + n + 1, first + 1, first + n + 2):
+                    if not marked[node]:
+                        marked[node] = True
+                        touched[n_touched] = node
+                        n_touched += 1
+                        if count < capacity:
+                            nodes[count], elements[count] = node, e
+                        count += 1
+    return count

@@ -910,7 +910,12 @@ def _build_pose(scene, directions, element_sizes_m, normal_step_rad, normal_quan
         raw_bits[:, begin // 64 : begin // 64 + words.shape[1]] = words
     del visibility  # the element-major copy: the bits and factors hold what the run time needs
     raw_corners = el_corners[raw_columns]
-    gap_ptr, gap_word, gap_mask, gap_rays = _horizon_gaps(mesh, raw_corners, raw_geo, raw_bits, directions, band)
+    gap_node, gap_element, gap_rays = _horizon_gaps(mesh, raw_corners, raw_geo, raw_bits, directions, band)
+    slit_node, slit_element, slit_rays = _slit_gaps(mesh, raw_corners, raw_geo, raw_bits, directions, element_size_m)
+    gap_ptr, gap_word, gap_mask = _gap_table(
+        np.r_[gap_node, slit_node], np.r_[gap_element, slit_element], len(directions), raw_bits.shape[1]
+    )
+    gap_rays += slit_rays
     return _Pose(
         normal_shade.astype(np.float32),
         group_class.astype(np.int32),
@@ -1009,6 +1014,9 @@ def _quarters(corners, normals):
 # many grid spacings away.
 _GAP_PROBES = 8
 _GAP_RINGS = (0.25, 0.5)
+# Rays from an open edge's samples look for a gap across it in the edge's triangle's plane and
+# tilted this many degrees out of it (_slits).
+_SLIT_TILTS_DEG = (-60.0, -30.0, 0.0, 30.0, 60.0)
 
 
 def _horizon_gaps(mesh, corners, normals, raw_bits, directions, band):
@@ -1026,12 +1034,12 @@ def _horizon_gaps(mesh, corners, normals, raw_bits, directions, band):
     pairs already cast rays), and at run time (:func:`_lit_classes`) a pair with a gap node
     among its four nodes is decided by rays toward the exact direction.
 
-    Returns (gap_ptr, gap_word, gap_mask): CSR by node (d + 1,) of (word, bit mask) of the
-    elements for which the node is a gap node, and the rays cast.
+    Returns the gap pairs' nodes and elements (p,) and the rays cast (:func:`_gap_table`
+    makes the run time's table of them).
     """
-    n_directions, n_elements = len(directions), len(corners)
+    n_elements = len(corners)
     if n_elements == 0 or not _GAP_RINGS:
-        return np.zeros(n_directions + 1, np.int64), np.zeros(0, np.int64), np.zeros(0, np.uint64), 0
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), 0
     raycaster, offset = open3d_scene(mesh), _ray_offset_m(mesh)
     grid_size = _grid_size_of(directions)
     u, v = orthonormal_basis(directions)
@@ -1083,15 +1091,178 @@ def _horizon_gaps(mesh, corners, normals, raw_bits, directions, band):
             elements.append(element[gap])
     node = np.concatenate(nodes) if nodes else np.zeros(0, np.int64)
     element = np.concatenate(elements) if elements else np.zeros(0, np.int64)
+    return node, element, n_rays
+
+
+def _gap_table(node, element, n_directions, n_words):
+    """The run time's gap table of (node, element) gap pairs: CSR by node (d + 1,) of (word,
+    bit mask) of the elements for which the node is a gap node (duplicate pairs are merged)."""
+    node, element = np.asarray(node, dtype=np.int64), np.asarray(element, dtype=np.int64)
     # One key per (node, word): the elements of a word that share a gap node share one mask.
-    span = raw_bits.shape[1] + 1
+    span = n_words + 1
     packed = node.astype(np.int64) * span + element // 64
     key = np.unique(packed)
     gap_node, gap_word = key // span, key % span
     mask = np.zeros(len(key), dtype=np.uint64)
     np.bitwise_or.at(mask, np.searchsorted(key, packed), np.left_shift(np.uint64(1), (element % 64).astype(np.uint64)))
     gap_ptr = np.r_[0, np.cumsum(np.bincount(gap_node, minlength=n_directions))].astype(np.int64)
-    return gap_ptr, gap_word.astype(np.int64), mask, n_rays
+    return gap_ptr, gap_word.astype(np.int64), mask
+
+
+def _slits(mesh, width_max_m, spacing_m):
+    """Segments (s, 2, 3) running along the gaps between the mesh's parts.
+
+    A panel built of slats (the paper's COSMOS 2502: 1.2-2.2 cm between them) or a part mounted
+    a little off another lets light through a gap that from most elements is narrower than the
+    grid: the four nodes around a direction through it are blocked, so the bits count the
+    element dark where it is lit or seen (the paper's tube behind its panels: up to 3% of the
+    whole light too faint at phase 90-110 deg, the cached model's main error on such passes).
+    Every edge is sampled every ``spacing_m``. A sample's gap is the nearer of: the nearest
+    sample of another connected part, and the nearest hit of rays leaving it outward across
+    the edge in its triangle's plane and tilted out of it (_SLIT_TILTS_DEG); it counts where it
+    is narrower than ``width_max_m`` and its middle is clear of the mesh by a quarter of its
+    width (parts touching along a seam have none). Returned are three lines along each gap (its
+    near side, middle and far side) between consecutive samples of an edge, so a direction
+    through the gap lies in a cell that one of them crosses. Also returns the rays cast.
+    """
+    corners = mesh.corners_m
+    if len(corners) == 0:
+        return np.zeros((0, 2, 3)), 0
+    tolerance = 1e-6 * max(mesh.radius_m, 1.0)
+    _, vertex = np.unique(np.round(corners.reshape(-1, 3) / tolerance), axis=0, return_inverse=True)
+    vertex = vertex.reshape(-1, 3).astype(np.int64)
+    ends = np.stack([vertex, np.roll(vertex, -1, axis=1)], axis=2)  # (t, 3, 2): edge k runs from corner k
+    key = ends.min(axis=2) * (int(vertex.max()) + 1) + ends.max(axis=2)
+    _, first_of = np.unique(key.reshape(-1), return_index=True)  # each edge once, from one of its triangles
+    tri, k = np.divmod(first_of, 3)
+    start, end, third = corners[tri, k], corners[tri, (k + 1) % 3], corners[tri, (k + 2) % 3]
+    normal = mesh.face_normals[tri]
+    along = end - start
+    outward = np.cross(along, normal)
+    outward /= np.maximum(np.linalg.norm(outward, axis=1, keepdims=True), 1e-300)
+    outward[np.einsum("ij,ij->i", third - start, outward) > 0.0] *= -1.0
+    # Samples: each edge's ends and points at most spacing_m apart between them.
+    per_edge = np.maximum(np.ceil(np.linalg.norm(along, axis=1) / spacing_m).astype(int), 1) + 1
+    edge = np.repeat(np.arange(len(tri)), per_edge)
+    first = np.r_[0, np.cumsum(per_edge)[:-1]]
+    fraction = (np.arange(len(edge)) - first[edge]) / (per_edge[edge] - 1)
+    fraction = np.clip(fraction, 0.01, 0.99)  # off the corners, where the next triangle begins
+    points = start[edge] + fraction[:, None] * along[edge]
+    offset = _ray_offset_m(mesh)
+    raycaster = open3d_scene(mesh)
+    reach = np.full(len(points), np.inf)
+    far = points.copy()
+    for tilt in np.radians(_SLIT_TILTS_DEG):
+        direction = math.cos(tilt) * outward[edge] + math.sin(tilt) * normal[edge]
+        rays = np.hstack([points + offset * direction, direction]).astype(np.float32)
+        hit = raycaster.cast_rays(rays)["t_hit"].numpy().astype(float)
+        nearer = hit < reach
+        reach[nearer] = hit[nearer]
+        far[nearer] = points[nearer] + hit[nearer, None] * direction[nearer]
+    # Gaps between two edges (slats side by side or meeting at a ridge may face each other
+    # edge-on, where rays across miss both): the nearest sample of another connected part.
+    part = _connected_parts(vertex)[tri[edge]]
+    distance, neighbour = cKDTree(points).query(points, k=min(32, len(points)), distance_upper_bound=width_max_m)
+    distance, neighbour = distance.reshape(len(points), -1), neighbour.reshape(len(points), -1)
+    other = (
+        (distance > offset) & np.isfinite(distance) & (part[np.minimum(neighbour, len(points) - 1)] != part[:, None])
+    )
+    column = np.argmax(other, axis=1)
+    rows = np.arange(len(points))
+    across = np.where(other[rows, column], distance[rows, column], np.inf)
+    closer = across < reach
+    reach[closer] = across[closer]
+    far[closer] = points[neighbour[rows, column][closer]]
+    gap = np.flatnonzero((reach < width_max_m) & (reach > offset))
+    middle = 0.5 * (points[gap] + far[gap])
+    clear = raycaster.compute_distance(middle.astype(np.float32)).numpy() >= 0.25 * reach[gap]
+    is_gap = np.zeros(len(points), dtype=bool)
+    is_gap[gap[clear]] = True
+    lines = np.stack([points, 0.5 * (points + far), far], axis=1)  # (samples, 3, 3)
+    # Segments between consecutive samples of one edge that both see a gap.
+    pair = np.flatnonzero((edge[1:] == edge[:-1]) & is_gap[1:] & is_gap[:-1])
+    segments = np.stack([lines[pair], lines[pair + 1]], axis=2)  # (p, 3 lines, 2 ends, 3)
+    return segments.reshape(-1, 2, 3), len(points) * len(_SLIT_TILTS_DEG)
+
+
+def _connected_parts(vertex):
+    """(t,) int: the connected part of each triangle of a mesh whose corners are the vertex
+    ids ``vertex`` (t, 3) (triangles sharing a vertex are connected)."""
+    from scipy.sparse.csgraph import connected_components
+
+    n_triangles, n_vertices = len(vertex), int(vertex.max()) + 1
+    graph = sparse.coo_matrix(
+        (np.ones(vertex.size), (np.repeat(np.arange(n_triangles), 3), n_triangles + vertex.reshape(-1))),
+        shape=(n_triangles + n_vertices,) * 2,
+    )
+    return connected_components(graph, directed=False)[1][:n_triangles]
+
+
+def _slit_gaps(mesh, corners, normals, raw_bits, directions, element_size_m):
+    """Gap pairs of bit-held elements that see out through a slit (:func:`_slits`).
+
+    Gaps up to the width the grid resolves from the far side of the mesh are taken (two radii
+    times the grid spacing; wider ones open whole grid cells, whose mixed pairs rays decide
+    already), sampled every half element. An element sees out through a stretch of gap where
+    the direction toward its middle lies in a cell whose four nodes it has blocked and a ray
+    that way escapes; then its directions toward the stretch's three lines, half a grid
+    spacing apart, mark the four nodes of every such cell they cross
+    (:func:`raycast.renderer._cache_kernels.slit_gap_nodes`): at run time a pair with a gap
+    node among its four nodes is decided by rays (:func:`_lit_classes`).
+
+    Returns the pairs' nodes and elements (p,) and the rays cast.
+    """
+    none = np.zeros(0, np.int64)
+    if len(corners) == 0:
+        return none, none, 0
+    spacing = _grid_spacing_rad(directions)
+    segments, n_rays = _slits(mesh, 2.0 * mesh.radius_m * spacing, element_size_m / 2.0)
+    if len(segments) == 0:
+        return none, none, n_rays
+    segments = segments.reshape(-1, 3, 2, 3)
+    middles = segments[:, 1].mean(axis=1)
+    origins = corners.astype(float).mean(axis=1) + _ray_offset_m(mesh) * normals
+    normals = np.ascontiguousarray(normals, dtype=float)
+    grid_size = _grid_size_of(directions)
+    raycaster = open3d_scene(mesh)
+    nodes, elements = [], []
+    chunk = 64 * max(1, _MAX_BUILD_RAYS // (64 * len(middles)))  # elements a batch: whole words
+    for begin in range(0, len(origins), chunk):
+        end = min(begin + chunk, len(origins))
+        words = np.ascontiguousarray(raw_bits[:, begin // 64 : -(-end // 64)])
+        element, segment = _collected_pairs(
+            _cache_kernels.slit_candidates, words, origins[begin:end], normals[begin:end], middles, grid_size
+        )
+        toward = middles[segment] - origins[begin + element]
+        toward /= np.linalg.norm(toward, axis=1, keepdims=True)
+        rays = np.hstack([origins[begin + element], toward]).astype(np.float32)
+        escapes = ~raycaster.test_occlusions(rays).numpy().astype(bool) if len(rays) else np.zeros(0, bool)
+        n_rays += len(rays)
+        node, local = _collected_pairs(
+            _cache_kernels.slit_gap_nodes,
+            words,
+            origins[begin:end],
+            normals[begin:end],
+            segments,
+            grid_size,
+            spacing / 2.0,
+            element[escapes],
+            segment[escapes],
+        )
+        nodes.append(node)
+        elements.append(local + begin)
+    return np.concatenate(nodes), np.concatenate(elements), n_rays
+
+
+def _collected_pairs(kernel, *arguments, capacity=1 << 16):
+    """``kernel(*arguments, first, second)``'s pairs of int64, in arrays of ``capacity`` first;
+    when they overflow (the kernel returns how many there were), it runs again with room for all."""
+    while True:
+        first, second = np.empty(capacity, np.int64), np.empty(capacity, np.int64)
+        count = kernel(*arguments, first, second)
+        if count <= capacity:
+            return first[:count], second[:count]
+        capacity = count
 
 
 def _split_where_partly_visible(mesh, corners, normals, tri, side, exposed, n_geo, directions, band, progress):
