@@ -25,6 +25,10 @@ What is precomputed
   directions (partly covered beside a mount or under a panel's edge) is replaced by its
   quarters. Elements that are never visible (the inner side of a closed part) are dropped;
   those never blocked are treated as exposed.
+* Where an element sees out through a gap narrower than the grid (close above its plane, or
+  between two parts anywhere in its sky: slats of a panel), the blocked grid nodes around such
+  directions are its *gap nodes*, and the run time decides those directions by exact rays
+  (``_horizon_gaps``, ``_slit_gaps``).
 * Smooth-shaded triangles are cut finely enough that the shading normal varies by at most
   ``normal_step_deg`` within an element (a fraction of the narrowest specular lobe).
 * The BRDF is evaluated once per frame and *shading class* (material and binned shading
