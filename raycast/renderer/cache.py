@@ -1178,10 +1178,10 @@ def _slits(mesh, width_max_m, spacing_m):
     reach[closer] = across[closer]
     far[closer] = points[neighbour[rows, column][closer]]
     gap = np.flatnonzero((reach < width_max_m) & (reach > offset))
-    middle = 0.5 * (points[gap] + far[gap])
-    clear = raycaster.compute_distance(middle.astype(np.float32)).numpy() >= 0.25 * reach[gap]
     is_gap = np.zeros(len(points), dtype=bool)
-    is_gap[gap[clear]] = True
+    if len(gap):
+        middle = 0.5 * (points[gap] + far[gap])
+        is_gap[gap[raycaster.compute_distance(middle.astype(np.float32)).numpy() >= 0.25 * reach[gap]]] = True
     lines = np.stack([points, 0.5 * (points + far), far], axis=1)  # (samples, 3, 3)
     # Segments between consecutive samples of one edge that both see a gap.
     pair = np.flatnonzero((edge[1:] == edge[:-1]) & is_gap[1:] & is_gap[:-1])
