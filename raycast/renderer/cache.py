@@ -55,6 +55,7 @@ import weakref
 
 import numpy as np
 from scipy import linalg, sparse
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 from tqdm.auto import tqdm
 
@@ -1192,8 +1193,6 @@ def _slits(mesh, width_max_m, spacing_m):
 def _connected_parts(vertex):
     """(t,) int: the connected part of each triangle of a mesh whose corners are the vertex
     ids ``vertex`` (t, 3) (triangles sharing a vertex are connected)."""
-    from scipy.sparse.csgraph import connected_components
-
     n_triangles, n_vertices = len(vertex), int(vertex.max()) + 1
     graph = sparse.coo_matrix(
         (np.ones(vertex.size), (np.repeat(np.arange(n_triangles), 3), n_triangles + vertex.reshape(-1))),
