@@ -240,7 +240,7 @@ class _Pose:
     raw_area: object  # (g, e) CSC float32: area of each element's pieces in each group
     raw_corners: np.ndarray  # (e, 3, 3) float32: the bit-held elements' corners (ray origins)
     raw_normals: np.ndarray  # (e, 3) float32: and their geometric normals
-    gap_ptr: np.ndarray  # (d + 1,) int64: CSR by node of the bit-held elements' gap nodes (_horizon_gaps)
+    gap_ptr: np.ndarray  # (d + 1,) int64: CSR by node of the bit-held elements' gap nodes (_horizon_gaps, _slit_gaps)
     gap_word: np.ndarray  # (q,) int64: their words
     gap_mask: np.ndarray  # (q,) uint64: and bit masks
     vertices_m: np.ndarray  # (3t, 3) float32: the posed triangles' corners, for exact visibility rays
@@ -1019,7 +1019,7 @@ def _quarters(corners, normals):
 # many grid spacings away.
 _GAP_PROBES = 8
 _GAP_RINGS = (0.25, 0.5)
-# Rays from an open edge's samples look for a gap across it in the edge's triangle's plane and
+# Rays from an edge's samples look for a gap across it in the edge's triangle's plane and
 # tilted this many degrees out of it (_slits).
 _SLIT_TILTS_DEG = (-60.0, -30.0, 0.0, 30.0, 60.0)
 
