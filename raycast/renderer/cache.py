@@ -1167,17 +1167,21 @@ def _slits(mesh, width_max_m, spacing_m):
     # Gaps between two edges (slats side by side or meeting at a ridge may face each other
     # edge-on, where rays across miss both): the nearest sample of another connected part.
     part = _connected_parts(vertex)[tri[edge]]
-    distance, neighbour = cKDTree(points).query(points, k=min(32, len(points)), distance_upper_bound=width_max_m)
-    distance, neighbour = distance.reshape(len(points), -1), neighbour.reshape(len(points), -1)
-    other = (
-        (distance > offset) & np.isfinite(distance) & (part[np.minimum(neighbour, len(points) - 1)] != part[:, None])
-    )
-    column = np.argmax(other, axis=1)
-    rows = np.arange(len(points))
-    across = np.where(other[rows, column], distance[rows, column], np.inf)
+    tree = cKDTree(points)
+    across, partner = np.full(len(points), np.inf), np.zeros(len(points), dtype=np.int64)
+    for begin in range(0, len(points), 4096):  # (samples, 32) arrays a block at a time
+        block = slice(begin, begin + 4096)
+        distance, neighbour = tree.query(points[block], k=min(32, len(points)), distance_upper_bound=width_max_m)
+        distance, neighbour = distance.reshape(len(distance), -1), neighbour.reshape(len(neighbour), -1)
+        other = (distance > offset) & np.isfinite(distance)
+        other &= part[np.minimum(neighbour, len(points) - 1)] != part[block, None]
+        column = np.argmax(other, axis=1)
+        rows = np.arange(len(column))
+        across[block] = np.where(other[rows, column], distance[rows, column], np.inf)
+        partner[block] = neighbour[rows, column]
     closer = across < reach
     reach[closer] = across[closer]
-    far[closer] = points[neighbour[rows, column][closer]]
+    far[closer] = points[partner[closer]]
     gap = np.flatnonzero((reach < width_max_m) & (reach > offset))
     is_gap = np.zeros(len(points), dtype=bool)
     if len(gap):
@@ -1259,12 +1263,14 @@ def _slit_gaps(mesh, corners, normals, raw_bits, directions, element_size_m):
 
 def _collected_pairs(kernel, *arguments, capacity=1 << 16):
     """``kernel(*arguments, first, second)``'s pairs of int64, in arrays of ``capacity`` first;
-    when they overflow (the kernel returns how many there were), it runs again with room for all."""
+    when they overflow (the kernel returns how many there were), it runs again with room for all.
+    The pairs come as copies: a view would keep the whole buffer (the gap search keeps one
+    result per batch of elements: 450 MB of buffers for 22 MB of pairs on the paper's mesh)."""
     while True:
         first, second = np.empty(capacity, np.int64), np.empty(capacity, np.int64)
         count = kernel(*arguments, first, second)
         if count <= capacity:
-            return first[:count], second[:count]
+            return first[:count].copy(), second[:count].copy()
         capacity = count
 
 
