@@ -203,3 +203,15 @@ def test_lowest_bit_is_the_index_of_the_lowest_set_bit():
         word = (above | np.uint64(1 << position)) & ~np.uint64((1 << position) - 1)
         assert _lowest_bit(np.uint64(1 << position)) == position
         assert _lowest_bit(word) == position
+
+
+def test_cube_cell_is_the_first_node_cube_grid_weights_gives():
+    from raycast.renderer.cache import cube_grid_weights
+
+    rng = np.random.default_rng(4)
+    directions = rng.normal(size=(2000, 3))
+    directions[:40] = np.eye(3)[rng.integers(0, 3, 40)] * rng.choice([-1.0, 1.0], (40, 1))  # face centres
+    for n in (4, 32, 64):
+        index, _ = cube_grid_weights(directions / np.linalg.norm(directions, axis=1, keepdims=True), n)
+        cells = [_cache_kernels._cube_cell(x, y, z, n) for x, y, z in directions]
+        np.testing.assert_array_equal(cells, index[:, 0])

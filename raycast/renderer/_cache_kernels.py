@@ -59,14 +59,19 @@ def mixed_pairs(words, sun_nodes, obs_nodes, sun, obs, normals):
 
 
 def _collected(kernel, capacity, *arguments):
-    """``kernel(*arguments, frames, elements, need)``'s pairs, in arrays sized `capacity` first;
-    when they overflow (the kernel returns how many there were), it runs again with room for all."""
+    """``kernel(*arguments, frames, elements, need)``'s pairs (:func:`collected`)."""
+    return collected(kernel, capacity, (np.int64, np.int64, np.uint8), *arguments)
+
+
+def collected(kernel, capacity, dtypes, *arguments):
+    """``kernel(*arguments, *outputs)``'s rows, one output array of each of ``dtypes``, sized
+    `capacity` first; when they overflow (the kernel returns how many rows there were), it runs
+    again with room for all. Returns views of the arrays' first rows."""
     while True:
-        frames, elements = np.empty(capacity, dtype=np.int64), np.empty(capacity, dtype=np.int64)
-        need = np.empty(capacity, dtype=np.uint8)
-        count = kernel(*arguments, frames, elements, need)
+        outputs = tuple(np.empty(capacity, dtype=dtype) for dtype in dtypes)
+        count = kernel(*arguments, *outputs)
         if count <= capacity:
-            return frames[:count], elements[:count], need[:count]
+            return tuple(output[:count] for output in outputs)
         capacity = count
 
 

@@ -1114,7 +1114,7 @@ def _gap_table(node, element, n_directions, n_words):
     return gap_ptr, gap_word.astype(np.int64), mask
 
 
-def _slits(mesh, width_max_m, spacing_m):
+def _slits(mesh, raycaster, width_max_m, spacing_m):
     """Segments (s, 2, 3) running along the gaps between the mesh's parts.
 
     A panel built of slats (the paper's COSMOS 2502: 1.2-2.2 cm between them) or a part mounted
@@ -1122,9 +1122,10 @@ def _slits(mesh, width_max_m, spacing_m):
     grid: the four nodes around a direction through it are blocked, so the bits count the
     element dark where it is lit or seen (the paper's tube behind its panels: up to 3% of the
     whole light too faint at phase 90-110 deg, the cached model's main error on such passes).
-    Every edge is sampled every ``spacing_m``. A sample's gap is the nearer of: the nearest
-    sample of another connected part, and the nearest hit of rays leaving it outward across
-    the edge in its triangle's plane and tilted out of it (_SLIT_TILTS_DEG); it counts where it
+    Every edge is sampled every ``spacing_m``; rays go into ``raycaster`` (the mesh's Open3D
+    scene). A sample's gap is the nearer of: the nearest sample of another connected part, and
+    the nearest hit of rays leaving it outward across the edge in its triangle's plane and
+    tilted out of it (_SLIT_TILTS_DEG); it counts where it
     is narrower than ``width_max_m`` and its middle is clear of the mesh by a quarter of its
     width (parts touching along a seam have none). Returned are three lines along each gap (its
     near side, middle and far side) between consecutive samples of an edge, so a direction
@@ -1154,7 +1155,6 @@ def _slits(mesh, width_max_m, spacing_m):
     fraction = np.clip(fraction, 0.01, 0.99)  # off the corners, where the next triangle begins
     points = start[edge] + fraction[:, None] * along[edge]
     offset = _ray_offset_m(mesh)
-    raycaster = open3d_scene(mesh)
     reach = np.full(len(points), np.inf)
     far = points.copy()
     for tilt in np.radians(_SLIT_TILTS_DEG):
@@ -1223,7 +1223,8 @@ def _slit_gaps(mesh, corners, normals, raw_bits, directions, element_size_m):
     if len(corners) == 0:
         return none, none, 0
     spacing = _grid_spacing_rad(directions)
-    segments, n_rays = _slits(mesh, 2.0 * mesh.radius_m * spacing, element_size_m / 2.0)
+    raycaster = open3d_scene(mesh)
+    segments, n_rays = _slits(mesh, raycaster, 2.0 * mesh.radius_m * spacing, element_size_m / 2.0)
     if len(segments) == 0:
         return none, none, n_rays
     segments = segments.reshape(-1, 3, 2, 3)
@@ -1231,22 +1232,30 @@ def _slit_gaps(mesh, corners, normals, raw_bits, directions, element_size_m):
     origins = corners.astype(float).mean(axis=1) + _ray_offset_m(mesh) * normals
     normals = np.ascontiguousarray(normals, dtype=float)
     grid_size = _grid_size_of(directions)
-    raycaster = open3d_scene(mesh)
     nodes, elements = [], []
     chunk = 64 * max(1, _MAX_BUILD_RAYS // (64 * len(middles)))  # elements a batch: whole words
     for begin in range(0, len(origins), chunk):
         end = min(begin + chunk, len(origins))
         words = np.ascontiguousarray(raw_bits[:, begin // 64 : -(-end // 64)])
-        element, segment = _collected_pairs(
-            _cache_kernels.slit_candidates, words, origins[begin:end], normals[begin:end], middles, grid_size
+        element, segment = _cache_kernels.collected(
+            _cache_kernels.slit_candidates,
+            1 << 16,
+            (np.int64, np.int64),
+            words,
+            origins[begin:end],
+            normals[begin:end],
+            middles,
+            grid_size,
         )
         toward = middles[segment] - origins[begin + element]
         toward /= np.linalg.norm(toward, axis=1, keepdims=True)
         rays = np.hstack([origins[begin + element], toward]).astype(np.float32)
         escapes = ~raycaster.test_occlusions(rays).numpy().astype(bool) if len(rays) else np.zeros(0, bool)
         n_rays += len(rays)
-        node, local = _collected_pairs(
+        node, local = _cache_kernels.collected(
             _cache_kernels.slit_gap_nodes,
+            1 << 16,
+            (np.int64, np.int64),
             words,
             origins[begin:end],
             normals[begin:end],
@@ -1256,22 +1265,11 @@ def _slit_gaps(mesh, corners, normals, raw_bits, directions, element_size_m):
             element[escapes],
             segment[escapes],
         )
-        nodes.append(node)
+        # Copies: a view would keep each batch's whole buffer (450 MB of them for 22 MB of pairs
+        # on the paper's mesh).
+        nodes.append(node.copy())
         elements.append(local + begin)
     return np.concatenate(nodes), np.concatenate(elements), n_rays
-
-
-def _collected_pairs(kernel, *arguments, capacity=1 << 16):
-    """``kernel(*arguments, first, second)``'s pairs of int64, in arrays of ``capacity`` first;
-    when they overflow (the kernel returns how many there were), it runs again with room for all.
-    The pairs come as copies: a view would keep the whole buffer (the gap search keeps one
-    result per batch of elements: 450 MB of buffers for 22 MB of pairs on the paper's mesh)."""
-    while True:
-        first, second = np.empty(capacity, np.int64), np.empty(capacity, np.int64)
-        count = kernel(*arguments, first, second)
-        if count <= capacity:
-            return first[:count].copy(), second[:count].copy()
-        capacity = count
 
 
 def _split_where_partly_visible(mesh, corners, normals, tri, side, exposed, n_geo, directions, band, progress):
