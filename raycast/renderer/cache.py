@@ -1237,33 +1237,19 @@ def _slit_gaps(mesh, corners, normals, raw_bits, directions, element_size_m):
     for begin in range(0, len(origins), chunk):
         end = min(begin + chunk, len(origins))
         words = np.ascontiguousarray(raw_bits[:, begin // 64 : -(-end // 64)])
-        element, segment = _cache_kernels.collected(
-            _cache_kernels.slit_candidates,
-            1 << 16,
-            (np.int64, np.int64),
-            words,
-            origins[begin:end],
-            normals[begin:end],
-            middles,
-            grid_size,
-        )
+        batch = (words, origins[begin:end], normals[begin:end])  # the kernels' first arguments
+
+        def pairs(kernel, *arguments):
+            return _cache_kernels.collected(kernel, 1 << 16, (np.int64, np.int64), *batch, *arguments)
+
+        element, segment = pairs(_cache_kernels.slit_candidates, middles, grid_size)
         toward = middles[segment] - origins[begin + element]
         toward /= np.linalg.norm(toward, axis=1, keepdims=True)
         rays = np.hstack([origins[begin + element], toward]).astype(np.float32)
         escapes = ~raycaster.test_occlusions(rays).numpy().astype(bool) if len(rays) else np.zeros(0, bool)
         n_rays += len(rays)
-        node, local = _cache_kernels.collected(
-            _cache_kernels.slit_gap_nodes,
-            1 << 16,
-            (np.int64, np.int64),
-            words,
-            origins[begin:end],
-            normals[begin:end],
-            segments,
-            grid_size,
-            spacing / 2.0,
-            element[escapes],
-            segment[escapes],
+        node, local = pairs(
+            _cache_kernels.slit_gap_nodes, segments, grid_size, spacing / 2.0, element[escapes], segment[escapes]
         )
         # Copies: a view would keep each batch's whole buffer (450 MB of them for 22 MB of pairs
         # on the paper's mesh).
