@@ -9,6 +9,7 @@ from raycast.renderer import ggx_tables
 from raycast.renderer.brdf import (
     GGX,
     Lambertian,
+    Mix,
     Principled,
     directional_albedo,
     fresnel_dielectric,
@@ -32,6 +33,7 @@ RECIPROCAL = [
     GGX(1.0, 0.8),
     Principled(base_color=0.0, roughness=0.5),
     Principled(base_color=0.8, metallic=1.0, roughness=0.4),
+    Mix(Lambertian(0.3), GGX(0.9, 0.1), 0.25),
 ]
 
 
@@ -61,6 +63,7 @@ def test_principled_is_not_reciprocal_like_cycles():
         GGX(1.0, 1.0),
         Principled(1.0, roughness=0.5),
         Principled(1.0, metallic=1.0, roughness=0.5),
+        Mix(Lambertian(1.0), GGX(1.0, 0.3), 0.4),
     ],
     ids=repr,
 )
@@ -227,6 +230,7 @@ def test_valid_reflection_normal_lifts_the_mirror_direction_to_the_threshold():
         (lambda: GGX(0.5, 0.3, masking="smith"), "masking='smith' is unknown"),
         (lambda: Lambertian(-0.1), "albedo=-0.1 is outside [0, 1]"),
         (lambda: Principled(0.5, ior=0.9), "ior=0.9 is outside (1, 4)"),
+        (lambda: Mix(Lambertian(0.5), GGX(0.5, 0.3), 1.2), "Mix: fac=1.2 is outside [0, 1]"),
     ],
 )
 def test_validation_messages(make, message):
@@ -263,3 +267,26 @@ def test_shade_keeps_diffuse_light_below_the_shading_horizon():
         ci, co, cio = (np.einsum("ij,ij->i", a, b) for a, b in ((wi, n), (wo, n), (wi, wo)))
         both = (ci > 0) & (co > 0)
         np.testing.assert_allclose(brdf.shade(ci, co, cio)[both], (brdf(wi, wo, n) * ci)[both], rtol=1e-13)
+
+
+def test_mix_is_blenders_mix_shader_of_its_two_inputs():
+    """Fac 0 is the first input, fac 1 the second, and between them the weighted sum, in both
+    the plain value and the renderers' shading (a swapped fac or a dropped input fails)."""
+    first, second = Principled(0.3, metallic=0.9, roughness=0.45), GGX(0.9, 0.08)
+    wi, wo = random_hemisphere(400), random_hemisphere(400)
+    n = np.tile([0.0, 0.0, 1.0], (400, 1))
+    a, b = first(wi, wo, n), second(wi, wo, n)
+    for fac in (0.0, 0.3, 1.0):
+        np.testing.assert_allclose(Mix(first, second, fac)(wi, wo, n), (1 - fac) * a + fac * b, rtol=1e-12)
+    ci, co, cio = wi[:, 2], wo[:, 2], np.einsum("ij,ij->i", wi, wo)
+    mixed = Mix(first, second, 0.3).shade(ci, co, cio)
+    np.testing.assert_allclose(mixed, 0.7 * first.shade(ci, co, cio) + 0.3 * second.shade(ci, co, cio), rtol=1e-12)
+    # The renderers sample for the narrower lobe whatever the fac.
+    assert Mix(first, second, 0.0).lobe_width_rad == pytest.approx(0.08**2)
+    assert Mix(Lambertian(0.2), Lambertian(0.5), 0.5).lobe_width_rad is None
+
+
+def test_mix_inputs_must_be_single_brdfs():
+    inner = Mix(Lambertian(0.5), GGX(0.5, 0.3), 0.5)
+    with pytest.raises(TypeError, match="Mix: second=.* must be a Lambertian, GGX or Principled BRDF"):
+        Mix(Lambertian(0.5), inner, 0.5)

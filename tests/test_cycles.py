@@ -153,6 +153,26 @@ def test_render_without_bpy_names_the_extra(monkeypatch):
             {"blender_node": "Glossy BSDF", "color": [0.5] * 3, "roughness": 0.3, "distribution": "PHONG"},
             "distribution='PHONG'; use one of GGX",
         ),
+        (
+            {"blender_node": "Mix Shader", "fac": 0.5, "shaders": [{"blender_node": "Diffuse BSDF", "color": [1] * 3}]},
+            "shaders=[{'blender_node': 'Diffuse BSDF', 'color': [1, 1, 1]}]; give a list of two node entries",
+        ),
+        (
+            {
+                "blender_node": "Mix Shader",
+                "fac": 0.5,
+                "shaders": [{"blender_node": "Diffuse BSDF", "color": [1] * 3}, {"blender_node": "Glossy BSDF"}],
+            },
+            "material 0.shaders[1] (Glossy BSDF) lacks 'color'",
+        ),
+        (
+            {
+                "blender_node": "Mix Shader",
+                "fac": 1.5,
+                "shaders": [{"blender_node": "Diffuse BSDF", "color": [1] * 3}] * 2,
+            },
+            "fac=1.5; give a number in [0.0, 1.0]",
+        ),
     ],
 )
 def test_bad_materials_are_refused(material, message):
@@ -342,6 +362,30 @@ def test_principled_limits_reduce_to_lambert_and_ggx():
     np.testing.assert_allclose(metal_only.intensity_m2_sr, metal_expected, rtol=1e-3)  # plate criterion
     both_expected = metal_expected / 2 + lambert_plate_intensity(PLATE_SUN[:3], PLATE_OBS[:3], 0.5)
     np.testing.assert_allclose(both.intensity_m2_sr, both_expected, rtol=1e-3)
+
+
+@pytest.mark.cycles
+def test_mix_shader_is_the_weighted_sum_of_its_inputs():
+    """Blender's Mix Shader as the project's Mix reads it: (1 - fac) first + fac second."""
+    fac = 0.3
+    material = {
+        "blender_node": "Mix Shader",
+        "fac": fac,
+        "shaders": [
+            {"blender_node": "Diffuse BSDF", "color": [0.5] * 3},
+            {"blender_node": "Glossy BSDF", "color": [0.8] * 3, "roughness": 0.3},
+        ],
+    }
+    result = render_cycles(plate(material), PLATE_SUN, PLATE_OBS, PLATE_SETTINGS, progress=False)
+    expected = (1 - fac) * lambert_plate_intensity(PLATE_SUN, PLATE_OBS, 0.5) + fac * glossy_plate_intensity(
+        PLATE_SUN, PLATE_OBS, 0.8, 0.3
+    )
+    np.testing.assert_allclose(result.intensity_m2_sr, expected, rtol=1e-3)  # plate criterion
+    # The fac really took effect: the glossy share alone moves these frames by far more.
+    swapped = fac * lambert_plate_intensity(PLATE_SUN, PLATE_OBS, 0.5) + (1 - fac) * glossy_plate_intensity(
+        PLATE_SUN, PLATE_OBS, 0.8, 0.3
+    )
+    assert np.abs(swapped / expected - 1).max() > 0.1
 
 
 @pytest.mark.cycles

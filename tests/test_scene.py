@@ -167,3 +167,26 @@ def test_photometry_magnitudes():
     assert set(photometry.SOLAR_MAGNITUDE_SOURCES) == set(photometry.SOLAR_MAGNITUDES)
     with pytest.raises(ValueError, match="band 'U' has no solar magnitude"):
         photometry.magnitude(1.0, 1000.0, "U")
+
+
+def test_mix_shader_record_reads_as_a_mix_of_its_two_nodes():
+    from raycast.cycles.runner import material_entry
+    from raycast.renderer.brdf import GGX, Mix, Principled
+    from raycast.renderer.materials import brdf_from_record
+
+    record = {
+        "blender_node": "Mix Shader",
+        "fac": 0.25,
+        "shaders": [
+            {"blender_node": "Principled BSDF", "base_color": [0.1, 0.3, 0.5], "metallic": 0.9, "roughness": 0.45},
+            {"blender_node": "Glossy BSDF", "color": [0.9, 0.9, 0.9], "roughness": 0.08},
+        ],
+    }
+    brdf = brdf_from_record("bus", record, channel="blue")
+    assert brdf == Mix(Principled(0.5, metallic=0.9, roughness=0.45), GGX(0.9, 0.08), 0.25)
+    # The Cycles entry of the BRDF reads back as the same BRDF.
+    assert brdf_from_record("bus", material_entry(brdf)) == brdf
+    with pytest.raises(ValueError, match="material 'bus': shaders=.* is not a list of two node records"):
+        brdf_from_record("bus", {**record, "shaders": record["shaders"][:1]})
+    with pytest.raises(ValueError, match="material 'bus': Mix: second=.* must be a Lambertian"):
+        brdf_from_record("bus", {**record, "shaders": [record["shaders"][0], record]})

@@ -9,7 +9,7 @@ normal's quadratic amplifies that to 5e-12 near its threshold).
 import numpy as np
 import pytest
 
-from raycast.renderer.brdf import BRDF, GGX, Lambertian, Principled
+from raycast.renderer.brdf import BRDF, GGX, Lambertian, Mix, Principled
 from raycast.renderer.rays import orthonormal_basis, sun_fractions
 from raycast.renderer.shading import disk_shading, reference_disk_shading, shaded_pairs
 
@@ -23,6 +23,8 @@ BRDFS = [
     Principled(0.8, metallic=1.0, roughness=0.7, distribution="MULTI_GGX"),
     Principled(0.5, metallic=0.3, roughness=0.4, ior=1.6, distribution="MULTI_GGX"),
     Principled(0.5, roughness=0.4, specular_ior_level=0.0),  # F0 = 0: no dielectric lobe
+    Mix(Principled(0.3, metallic=0.9, roughness=0.45), GGX(0.9, 0.08), 0.2),
+    Mix(Lambertian(0.5), Principled(0.6, roughness=0.3, distribution="MULTI_GGX"), 0.7),
 ]
 
 

@@ -273,14 +273,26 @@ def _smooth_faces(vertices, triangles, corner_normals):
 
 
 def _material(entry):
-    """A Blender material holding one BSDF node set from a materials-JSON entry."""
-    kind = entry["blender_node"]
-    material = bpy.data.materials.new(kind)
+    """A Blender material holding the shader node(s) of a materials-JSON entry."""
+    material = bpy.data.materials.new(entry["blender_node"])
     tree = material.node_tree
     for node in list(tree.nodes):
         if node.type != "OUTPUT_MATERIAL":
             tree.nodes.remove(node)
     output = next(node for node in tree.nodes if node.type == "OUTPUT_MATERIAL")
+    tree.links.new(_shader_node(tree, entry).outputs[0], output.inputs["Surface"])
+    return material
+
+
+def _shader_node(tree, entry):
+    """The node of one entry: a BSDF, or a Mix Shader fed by the BSDFs of its two ``shaders``."""
+    kind = entry["blender_node"]
+    if kind == "Mix Shader":
+        mix = tree.nodes.new("ShaderNodeMixShader")
+        mix.inputs["Fac"].default_value = entry["fac"]
+        for socket, shader in zip((1, 2), entry["shaders"]):
+            tree.links.new(_shader_node(tree, shader).outputs[0], mix.inputs[socket])
+        return mix
     bsdf = tree.nodes.new(_NODE_TYPES[kind])
     if kind == "Diffuse BSDF":
         bsdf.inputs["Color"].default_value = (*entry["color"], 1.0)
@@ -296,8 +308,7 @@ def _material(entry):
         bsdf.inputs["Roughness"].default_value = entry["roughness"]
         bsdf.inputs["Specular IOR Level"].default_value = entry["specular_ior_level"]
         bsdf.inputs["IOR"].default_value = entry.get("ior", 1.5)
-    tree.links.new(bsdf.outputs[0], output.inputs["Surface"])
-    return material
+    return bsdf
 
 
 def _add_sun(scene, sun_angle_deg):

@@ -38,7 +38,7 @@ from types import MappingProxyType
 import numpy as np
 from tqdm.auto import tqdm
 
-from raycast.renderer.brdf import GGX, Lambertian, Principled
+from raycast.renderer.brdf import GGX, Lambertian, Mix, Principled
 from raycast.renderer.materials import read_materials_json
 from raycast.renderer.meshio import read_obj
 
@@ -66,6 +66,8 @@ MATERIAL_FIELDS = {
         ("base_color", "metallic", "roughness", "specular_ior_level"),
         {"ior": 1.5, "distribution": "GGX"},
     ),
+    # (1 - fac) shaders[0] + fac shaders[1]; each of the two is an entry of the nodes above.
+    "Mix Shader": (("fac", "shaders"), {}),
 }
 _DISTRIBUTIONS = {
     "Glossy BSDF": ("GGX", "MULTI_GGX", "BECKMANN", "ASHIKHMIN_SHIRLEY"),
@@ -372,7 +374,13 @@ def material_entry(brdf) -> dict:
             "ior": brdf.ior,
             "distribution": brdf.distribution,
         }
-    raise TypeError(f"{brdf!r} models no Blender node; give Lambertian, GGX or Principled BRDFs")
+    if isinstance(brdf, Mix):
+        return {
+            "blender_node": "Mix Shader",
+            "fac": brdf.fac,
+            "shaders": [material_entry(brdf.first), material_entry(brdf.second)],
+        }
+    raise TypeError(f"{brdf!r} models no Blender node; give Lambertian, GGX, Principled or Mix BRDFs")
 
 
 def _finite_array(value, name, shape, dtype):
@@ -425,6 +433,14 @@ def _checked_material(entry, index):
                     f"material {index} ({kind}) has {key}={value!r}; give three linear RGB values in [0, 1]"
                 )
             checked[key] = tuple(float(c) for c in color)
+        elif key == "shaders":
+            if not isinstance(value, Sequence) or isinstance(value, str) or len(value) != 2:
+                raise ValueError(f"material {index} ({kind}) has shaders={value!r}; give a list of two node entries")
+            inner = [_checked_material(shader, f"{index}.shaders[{k}]") for k, shader in enumerate(value)]
+            nested = [k for k, shader in enumerate(inner) if shader["blender_node"] == "Mix Shader"]
+            if nested:
+                raise ValueError(f"material {index}.shaders[{nested[0]}] is a Mix Shader; mix two BSDF nodes")
+            checked[key] = inner
         elif key == "distribution":
             if value not in _DISTRIBUTIONS[kind]:
                 raise ValueError(

@@ -24,6 +24,9 @@ slot  Lambertian  GGX                        Principled
 16+               E(mu) at 32 nodes          E(mu) at 32 nodes, then s(mu) at 16 nodes
 ====  ==========  =========================  ==============================================
 
+A Mix (Blender's Mix Shader) is kind 3 with its fac in slot 1, followed by its two inputs' packed
+arrays (:func:`as_packed_mix`); its inputs are never mixes themselves.
+
 E and s are :mod:`raycast.renderer.ggx_tables`' curves at the BRDF's roughness (and eta),
 interpolated linearly in mu as np.interp does, so the tables' values are the reference's own.
 """
@@ -35,9 +38,11 @@ import numpy as np
 
 from raycast.renderer.rays import SUN_RADIUS_RAD, risen_sun, sun_fraction
 
-LAMBERTIAN, GGX, PRINCIPLED = 0, 1, 2
+LAMBERTIAN, GGX, PRINCIPLED, MIX = 0, 1, 2, 3
 CURVES = 16
 E_NODES, S_NODES = 32, 16
+# Length of one packed BRDF; a Mix holds its two inputs after its own.
+SIZE = CURVES + E_NODES + S_NODES
 
 
 @njit(cache=True, nogil=True)
@@ -97,6 +102,16 @@ def _dielectric_fresnel(c, eta):
 def shade(packed, cos_i, cos_o, cos_io, spec_i, spec_o, bent):
     """f_r cos(i) as :meth:`raycast.renderer.brdf.BRDF.shade` gives it, at one point; with
     ``bent`` the specular lobes use the cosines ``spec_i``, ``spec_o`` to the bent normal."""
+    if packed[0] != MIX:
+        return _shade_one(packed, cos_i, cos_o, cos_io, spec_i, spec_o, bent)
+    first = _shade_one(packed[SIZE : 2 * SIZE], cos_i, cos_o, cos_io, spec_i, spec_o, bent)
+    second = _shade_one(packed[2 * SIZE :], cos_i, cos_o, cos_io, spec_i, spec_o, bent)
+    return (1.0 - packed[1]) * first + packed[1] * second
+
+
+@njit(cache=True, nogil=True)
+def _shade_one(packed, cos_i, cos_o, cos_io, spec_i, spec_o, bent):
+    """:func:`shade` of one Lambertian, GGX or Principled BRDF."""
     kind = packed[0]
     if kind == LAMBERTIAN:
         return packed[1] / math.pi * max(cos_i, 0.0)
@@ -204,9 +219,16 @@ def shaded_pairs(
         total[into[r]] += area[r] * value
 
 
+def as_packed_mix(fac, first, second):
+    """A packed Mix: its own slots (kind, fac), then its two inputs' packed arrays."""
+    head = np.zeros(SIZE)
+    head[0], head[1] = MIX, fac
+    return np.concatenate([head, first, second])
+
+
 def as_packed(lobe_curves, head):
     """A packed BRDF (module docstring): ``head`` (the slots before the curves) and its curves."""
-    packed = np.zeros(CURVES + E_NODES + S_NODES)
+    packed = np.zeros(SIZE)
     packed[: len(head)] = head
     for start, curve in zip((CURVES, CURVES + E_NODES), lobe_curves):
         packed[start : start + len(curve)] = curve

@@ -39,6 +39,10 @@ Principled
     lobe at the view cosine mu, from tables of GGX integrals (:mod:`raycast.renderer.ggx_tables`),
     with d the multiple-scattering factor (1 for plain GGX). Because the weight depends on the
     view only, this model (like Cycles') is not exactly reciprocal.
+Mix
+    Blender's Mix Shader: (1 - fac) first + fac second, of two of the BRDFs above. A surface
+    whose area is partly one finish and partly another (a bus of blankets with smooth radiator
+    panels among them, each part smaller than a pixel) reflects as this weighted sum.
 """
 
 from __future__ import annotations
@@ -65,6 +69,7 @@ __all__ = [
     "Lambertian",
     "GGX",
     "Principled",
+    "Mix",
     "DISTRIBUTIONS",
     "fresnel_dielectric",
     "ggx_distribution",
@@ -487,6 +492,55 @@ class Principled(BRDF):
             dielectric_fresnel_mean(self.roughness, _S_NODES, self.eta) if self.eta != 1.0 else (),
         )
         return _shading_kernels.as_packed(curves, head)
+
+
+@dataclass(frozen=True)
+class Mix(BRDF):
+    """Blender's Mix Shader: ``(1 - fac) first + fac second``.
+
+    Parameters
+    ----------
+    first, second : Lambertian, GGX or Principled, the node's upper and lower shader inputs.
+    fac : float in [0, 1], the node's Fac: the share of ``second``.
+
+    The lobe a renderer samples for is the narrowest of the two whatever ``fac`` is (a fit that
+    frees ``fac`` builds its cache once, at any value), and a mix counts as a strong lobe
+    (:attr:`lobe_share` 1) when either input has one.
+    """
+
+    first: BRDF
+    second: BRDF
+    fac: float
+
+    def __post_init__(self):
+        for name in ("first", "second"):
+            value = getattr(self, name)
+            if not isinstance(value, (Lambertian, GGX, Principled)):
+                raise TypeError(f"Mix: {name}={value!r} must be a Lambertian, GGX or Principled BRDF")
+        _check_unit_interval("fac", self.fac, "Mix")
+
+    @property
+    def lobe_width_rad(self) -> float | None:
+        widths = [b.lobe_width_rad for b in (self.first, self.second) if b.lobe_width_rad]
+        return min(widths) if widths else None
+
+    @property
+    def lobe_share(self) -> float:
+        lobed = [b.lobe_share for b in (self.first, self.second) if b.lobe_width_rad]
+        return max(lobed) if lobed else 1.0
+
+    def from_cosines(self, cos_i, cos_o, cos_io):
+        return (1.0 - self.fac) * self.first.from_cosines(cos_i, cos_o, cos_io) + self.fac * self.second.from_cosines(
+            cos_i, cos_o, cos_io
+        )
+
+    def shade(self, cos_i, cos_o, cos_io, spec_cos_i=None, spec_cos_o=None):
+        cosines = (cos_i, cos_o, cos_io, spec_cos_i, spec_cos_o)
+        return (1.0 - self.fac) * self.first.shade(*cosines) + self.fac * self.second.shade(*cosines)
+
+    @lru_cache(maxsize=_PACKED_KEPT)
+    def packed(self):
+        return _shading_kernels.as_packed_mix(self.fac, self.first.packed(), self.second.packed())
 
 
 def directional_albedo(brdf, cos_o, n_theta=256, n_phi=128):

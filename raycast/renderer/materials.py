@@ -10,6 +10,8 @@ records naming the Blender node they came from:
     -> :class:`raycast.renderer.brdf.Principled` (``ior`` optional: see below)
 ``{"blender_node": "Diffuse BSDF", "color": [r, g, b]}``
     -> :class:`raycast.renderer.brdf.Lambertian`
+``{"blender_node": "Mix Shader", "fac": 0.2, "shaders": [record, record]}``
+    -> :class:`raycast.renderer.brdf.Mix` of two of the records above, ``(1 - fac) first + fac second``
 
 Glossy and Principled records may name Blender's microfacet ``distribution``: ``"GGX"`` (the
 default here, single scattering) or ``"MULTI_GGX"`` (Blender 5's default for new nodes).
@@ -31,7 +33,7 @@ import math
 from pathlib import Path
 
 from ingest.errors import FormatError
-from raycast.renderer.brdf import BRDF, GGX, Lambertian, Principled
+from raycast.renderer.brdf import BRDF, GGX, Lambertian, Mix, Principled
 
 __all__ = ["CHANNELS", "BAND_CHANNELS", "brdf_from_record", "read_materials_json", "brdf_from_mtl", "channel_for_band"]
 
@@ -92,13 +94,20 @@ def brdf_from_record(name: str, record: dict, channel: str = "green", mtl_ior: f
             )
         if node in ("diffuse bsdf", "diffuse", "lambertian"):
             return Lambertian(albedo=_reduce_color(record["color"], channel, where))
+        if node in ("mix shader", "mix"):
+            shaders = record["shaders"]
+            if not isinstance(shaders, list) or len(shaders) != 2 or not all(isinstance(r, dict) for r in shaders):
+                raise ValueError(f"shaders={shaders!r} is not a list of two node records")
+            first, second = (brdf_from_record(name, r, channel, mtl_ior) for r in shaders)
+            return Mix(first, second, float(record["fac"]))
     except KeyError as missing:
         raise ValueError(f"{where}: record {record!r} lacks the key {missing}; add it to the materials JSON") from None
-    except ValueError as error:
-        raise ValueError(f"{where}: {error}") from None
+    except (TypeError, ValueError) as error:
+        message = str(error)
+        raise ValueError(message if message.startswith(where) else f"{where}: {message}") from None
     raise ValueError(
         f"{where}: blender_node {record.get('blender_node')!r} is not supported; use "
-        "'Glossy BSDF', 'Principled BSDF' or 'Diffuse BSDF'"
+        "'Glossy BSDF', 'Principled BSDF', 'Diffuse BSDF' or 'Mix Shader'"
     )
 
 
