@@ -236,13 +236,10 @@ class CyclesMesh:
             raise ValueError(
                 f'material {unknown[0]!r} used in {path} has no entry in {materials_json}; add it under "materials"'
             )
-        materials = []
-        for name in mesh.material_names:
-            entry = dict(table[name])
-            mtl_ior = mesh.material_records.get(name, {}).get("Ni", 0.0)
-            if entry.get("blender_node") == "Principled BSDF" and "ior" not in entry and mtl_ior > 1.0:
-                entry["ior"] = mtl_ior
-            materials.append(entry)
+        materials = [
+            _with_mtl_ior(table[name], mesh.material_records.get(name, {}).get("Ni", 0.0))
+            for name in mesh.material_names
+        ]
         flat = np.isnan(mesh.corner_normals).any(axis=2, keepdims=True)
         geometric = np.broadcast_to(
             _geometric_normals(mesh.vertices_m, mesh.triangles)[:, None, :], flat.shape[:2] + (3,)
@@ -351,6 +348,19 @@ class ObjImport:
             "materials_json": np.array(json.dumps([entry for _, entry in self.materials])),
             "material_names_json": np.array(json.dumps([name for name, _ in self.materials])),
         }
+
+
+def _with_mtl_ior(entry, mtl_ior):
+    """A copy of a materials-JSON entry whose Principled nodes (a Mix Shader's too) without an
+    ``ior`` take the .mtl's ``Ni``, as :func:`raycast.renderer.materials.brdf_from_record` does."""
+    entry = dict(entry)
+    if entry.get("blender_node") == "Mix Shader" and isinstance(entry.get("shaders"), list):
+        entry["shaders"] = [
+            _with_mtl_ior(shader, mtl_ior) if isinstance(shader, Mapping) else shader for shader in entry["shaders"]
+        ]
+    elif entry.get("blender_node") == "Principled BSDF" and "ior" not in entry and mtl_ior > 1.0:
+        entry["ior"] = mtl_ior
+    return entry
 
 
 def material_entry(brdf) -> dict:
