@@ -189,8 +189,7 @@ def test_a_window_narrower_than_the_grid_is_seen_through(monkeypatch):
     monkeypatch.setattr(raycast.renderer.cache, "_GAP_RINGS", ())  # no horizon probes: the slit's gap nodes alone
     slits_only = SceneCache.build(scene, element_size_m=0.03)
     assert rms_mag(slits_only.intensity(sun, obs), reference) < 0.05
-    no_slits = (np.zeros(0, np.int64), np.zeros(0, np.int64), 0)
-    monkeypatch.setattr(raycast.renderer.cache, "_slit_gaps", lambda *args: no_slits)  # no gap nodes at all
+    monkeypatch.setattr(raycast.renderer.cache, "_slit_gaps", lambda *args: 0)  # no gap nodes at all
     blind = SceneCache.build(scene, element_size_m=0.03)
     assert len(blind.poses[0].gap_word) == 0
     assert rms_mag(blind.intensity(sun, obs), reference) > 0.5
@@ -215,8 +214,7 @@ def test_light_through_slits_between_slats_reaches_the_surface_below(monkeypatch
     cache = SceneCache.build(scene, element_size_m=0.03, grid_size=32)
     assert len(cache.poses[0].gap_word) > 0
     error = rms_mag(cache.intensity(sun, obs), reference)
-    no_slits = (np.zeros(0, np.int64), np.zeros(0, np.int64), 0)
-    monkeypatch.setattr(raycast.renderer.cache, "_slit_gaps", lambda *args: no_slits)
+    monkeypatch.setattr(raycast.renderer.cache, "_slit_gaps", lambda *args: 0)
     blind = SceneCache.build(scene, element_size_m=0.03, grid_size=32)
     blind_error = rms_mag(blind.intensity(sun, obs), reference)
     assert error < 0.015  # 0.0066 measured
@@ -384,3 +382,25 @@ def test_build_keeps_its_working_tables_in_pieces():
     assert np.allclose(normal[order], (mean / np.linalg.norm(mean, axis=1, keepdims=True))[expected_order])
     triangle_area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
     assert np.allclose(np.bincount(parent, weights=area), triangle_area)
+
+
+def test_gap_table_holds_every_pair_once_whatever_the_chunks():
+    """The gap searches' pairs (repeated, in batches) become one bit per (node, element) in the
+    run time's CSR table, the same when the table is built in chunks that cut nodes' runs."""
+    rng = np.random.default_rng(5)
+    n_elements, n_directions = 300, 96
+    node, element = rng.integers(0, n_directions, 20_000), rng.integers(0, n_elements, 20_000)
+    gaps = cache_module._GapPairs(n_elements)
+    for batch in np.array_split(np.arange(len(node)), 7):
+        gaps.add(node[batch], element[batch])
+    expected = np.zeros((n_directions, n_elements), dtype=bool)
+    expected[node, element] = True
+    for chunk in (64, 1 << 18):
+        ptr, word, mask = cache_module._gap_table(gaps.merged(), n_elements, n_directions, chunk=chunk)
+        table = np.zeros_like(expected)
+        for d in range(n_directions):
+            for w, m in zip(word[ptr[d] : ptr[d + 1]], mask[ptr[d] : ptr[d + 1]]):
+                bits = np.flatnonzero([(int(m) >> b) & 1 for b in range(64)])
+                table[d, 64 * w + bits] = True
+        np.testing.assert_array_equal(table, expected)
+        assert len(word) == len(np.unique(np.c_[node, element // 64], axis=0))  # one entry per (node, word)

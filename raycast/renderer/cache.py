@@ -903,7 +903,11 @@ def _build_pose(scene, directions, element_sizes_m, normal_step_rad, normal_quan
         shape=(n_groups, len(raw_columns)),
     )
     raw_area.sort_indices()
-    raw_geo = parent_geo[raw_columns]
+    raw_geo, raw_corners = parent_geo[raw_columns], el_corners[raw_columns]
+    # Let go of all but what the bits are made from before they are: here the visibility and its
+    # bits are both held, the build's peak on a glossy mesh.
+    n_pairs = len(pairs)
+    del pairs, pair_area, in_raw_group, raw_element, first_group, order, rank, parent_geo, el_corners, seen, blocked
     # Bits are cleared for directions further below an element's plane than the horizon band
     # (_visibility leaves them set for the cosine gate): an element facing well away from the
     # Sun or the observer then has no bit set around it, and the run time passes over it.
@@ -914,13 +918,11 @@ def _build_pose(scene, directions, element_sizes_m, normal_step_rad, normal_quan
         words = _cache_kernels.pack_words(_unpacked(visibility[row_of[columns]], len(directions)).astype(bool) & above)
         raw_bits[:, begin // 64 : begin // 64 + words.shape[1]] = words
     del visibility  # the element-major copy: the bits and factors hold what the run time needs
-    raw_corners = el_corners[raw_columns]
-    gap_node, gap_element, gap_rays = _horizon_gaps(mesh, raw_corners, raw_geo, raw_bits, directions, band)
-    slit_node, slit_element, slit_rays = _slit_gaps(mesh, raw_corners, raw_geo, raw_bits, directions, element_size_m)
-    gap_ptr, gap_word, gap_mask = _gap_table(
-        np.r_[gap_node, slit_node], np.r_[gap_element, slit_element], len(directions), raw_bits.shape[1]
-    )
-    gap_rays += slit_rays
+    gaps = _GapPairs(len(raw_columns))
+    gap_rays = _horizon_gaps(gaps, mesh, raw_corners, raw_geo, raw_bits, directions, band)
+    gap_rays += _slit_gaps(gaps, mesh, raw_corners, raw_geo, raw_bits, directions, element_size_m)
+    gap_ptr, gap_word, gap_mask = _gap_table(gaps.merged(), len(raw_columns), len(directions))
+    del gaps
     return _Pose(
         normal_shade.astype(np.float32),
         group_class.astype(np.int32),
@@ -940,8 +942,8 @@ def _build_pose(scene, directions, element_sizes_m, normal_step_rad, normal_quan
         gap_mask,
         mesh.vertices_m.astype(np.float32),
         _ray_offset_m(mesh),
-        n_groups + len(pairs),
-        len(pairs),
+        n_groups + n_pairs,
+        n_pairs,
         n_rays + gap_rays,
         blocks,
     )
@@ -1024,7 +1026,7 @@ _GAP_RINGS = (0.25, 0.5)
 _SLIT_TILTS_DEG = (-60.0, -30.0, 0.0, 30.0, 60.0)
 
 
-def _horizon_gaps(mesh, corners, normals, raw_bits, directions, band):
+def _horizon_gaps(gaps, mesh, corners, normals, raw_bits, directions, band):
     """Grid nodes close above a bit-held element's horizon where it sees out through a gap
     narrower than the grid.
 
@@ -1039,12 +1041,12 @@ def _horizon_gaps(mesh, corners, normals, raw_bits, directions, band):
     pairs already cast rays), and at run time (:func:`_lit_classes`) a pair with a gap node
     among its four nodes is decided by rays toward the exact direction.
 
-    Returns the gap pairs' nodes and elements (p,) and the rays cast (:func:`_gap_table`
-    makes the run time's table of them).
+    Adds the gap pairs to ``gaps`` (a :class:`_GapPairs`; :func:`_gap_table` makes the run
+    time's table of them) and returns the number of rays cast.
     """
     n_elements = len(corners)
     if n_elements == 0 or not _GAP_RINGS:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64), 0
+        return 0
     raycaster, offset = open3d_scene(mesh), _ray_offset_m(mesh)
     grid_size = _grid_size_of(directions)
     u, v = orthonormal_basis(directions)
@@ -1056,7 +1058,7 @@ def _horizon_gaps(mesh, corners, normals, raw_bits, directions, band):
     )
     around /= np.linalg.norm(around, axis=2, keepdims=True)  # (d, probes, 3)
     origins = corners.astype(float).mean(axis=1) + offset * normals
-    nodes, elements, n_rays = [], [], 0
+    n_rays = 0
     # Elements per batch, whole words, so that a batch casts about _MAX_BUILD_RAYS: a node is
     # within the band above an element's plane for a share band / 2 of the directions.
     per_element = max(1, int(len(directions) * band / 2.0) * around.shape[1])
@@ -1092,26 +1094,62 @@ def _horizon_gaps(mesh, corners, normals, raw_bits, directions, band):
             shut = ~bits[corners_of, (element[pair[seen]] - begin)[:, None]].any(axis=1)
             gap = np.zeros(len(node), dtype=bool)
             gap[pair[seen[shut]]] = True
-            nodes.append(node[gap])
-            elements.append(element[gap])
-    node = np.concatenate(nodes) if nodes else np.zeros(0, np.int64)
-    element = np.concatenate(elements) if elements else np.zeros(0, np.int64)
-    return node, element, n_rays
+            gaps.add(node[gap], element[gap])
+    return n_rays
 
 
-def _gap_table(node, element, n_directions, n_words):
-    """The run time's gap table of (node, element) gap pairs: CSR by node (d + 1,) of (word,
-    bit mask) of the elements for which the node is a gap node (duplicate pairs are merged)."""
-    node, element = np.asarray(node, dtype=np.int64), np.asarray(element, dtype=np.int64)
-    # One key per (node, word): the elements of a word that share a gap node share one mask.
-    span = n_words + 1
-    packed = node.astype(np.int64) * span + element // 64
-    key = np.unique(packed)
-    gap_node, gap_word = key // span, key % span
-    mask = np.zeros(len(key), dtype=np.uint64)
-    np.bitwise_or.at(mask, np.searchsorted(key, packed), np.left_shift(np.uint64(1), (element % 64).astype(np.uint64)))
-    gap_ptr = np.r_[0, np.cumsum(np.bincount(gap_node, minlength=n_directions))].astype(np.int64)
-    return gap_ptr, gap_word.astype(np.int64), mask
+class _GapPairs:
+    """The gap searches' (node, element) pairs, merged as they are found: sorted unique int64
+    keys ``node * n_elements + element``, 8 bytes a pair (on the all-Glossy paper mesh the
+    searches find 4 million pairs, many of them several times over)."""
+
+    def __init__(self, n_elements):
+        self.n_elements = n_elements
+        self._keys = np.zeros(0, np.int64)
+        self._pending, self._n_pending = [], 0
+
+    def add(self, node, element):
+        batch = np.unique(np.asarray(node, dtype=np.int64) * self.n_elements + element)
+        self._pending.append(batch)
+        self._n_pending += len(batch)
+        if self._n_pending > max(len(self._keys), _MAX_BUILD_RAYS):  # merged at least each doubling
+            self._merge()
+
+    def _merge(self):
+        if not self._pending:
+            return
+        merged = np.concatenate([self._keys, *self._pending])
+        self._keys, self._pending, self._n_pending = None, [], 0
+        merged.sort()  # in place, and deduplicated into one copy: three times the keys at most
+        self._keys = merged[np.r_[True, merged[1:] != merged[:-1]]] if len(merged) else merged
+
+    def merged(self):
+        """All pairs' keys, sorted and unique."""
+        self._merge()
+        return self._keys
+
+
+def _gap_table(keys, n_elements, n_directions, chunk=1 << 18):
+    """The run time's gap table of gap pairs (sorted unique keys of :class:`_GapPairs`): CSR
+    by node (d + 1,) of (word, bit mask) of the elements for which the node is a gap node."""
+    keys = np.asarray(keys, dtype=np.int64)
+    words, masks, counts = [], [], np.zeros(n_directions, dtype=np.int64)
+    begin = 0
+    while begin < len(keys):  # in chunks of whole nodes, so that no (node, word) run is cut
+        end = min(begin + chunk, len(keys))
+        end = int(np.searchsorted(keys, (keys[end - 1] // n_elements + 1) * n_elements))
+        node, element = np.divmod(keys[begin:end], n_elements)
+        word = element // 64
+        # Sorted by node then element: the pairs of one (node, word) are a run, their bits ORed.
+        starts = np.flatnonzero(np.r_[True, (node[1:] != node[:-1]) | (word[1:] != word[:-1])])
+        masks.append(np.bitwise_or.reduceat(np.left_shift(np.uint64(1), (element % 64).astype(np.uint64)), starts))
+        words.append(word[starts])
+        counts += np.bincount(node[starts], minlength=n_directions)
+        begin = end
+    gap_ptr = np.r_[0, np.cumsum(counts)].astype(np.int64)
+    if not words:
+        return gap_ptr, np.zeros(0, np.int64), np.zeros(0, np.uint64)
+    return gap_ptr, np.concatenate(words), np.concatenate(masks)
 
 
 def _slits(mesh, raycaster, width_max_m, spacing_m):
@@ -1205,7 +1243,7 @@ def _connected_parts(vertex):
     return connected_components(graph, directed=False)[1][:n_triangles]
 
 
-def _slit_gaps(mesh, corners, normals, raw_bits, directions, element_size_m):
+def _slit_gaps(gaps, mesh, corners, normals, raw_bits, directions, element_size_m):
     """Gap pairs of bit-held elements that see out through a slit (:func:`_slits`).
 
     Gaps up to the width the grid resolves from the far side of the mesh are taken (two radii
@@ -1217,22 +1255,20 @@ def _slit_gaps(mesh, corners, normals, raw_bits, directions, element_size_m):
     (:func:`raycast.renderer._cache_kernels.slit_gap_nodes`): at run time a pair with a gap
     node among its four nodes is decided by rays (:func:`_lit_classes`).
 
-    Returns the pairs' nodes and elements (p,) and the rays cast.
+    Adds the pairs to ``gaps`` (a :class:`_GapPairs`) and returns the number of rays cast.
     """
-    none = np.zeros(0, np.int64)
     if len(corners) == 0:
-        return none, none, 0
+        return 0
     spacing = _grid_spacing_rad(directions)
     raycaster = open3d_scene(mesh)
     segments, n_rays = _slits(mesh, raycaster, 2.0 * mesh.radius_m * spacing, element_size_m / 2.0)
     if len(segments) == 0:
-        return none, none, n_rays
+        return n_rays
     segments = segments.reshape(-1, 3, 2, 3)
     middles = segments[:, 1].mean(axis=1)
     origins = corners.astype(float).mean(axis=1) + _ray_offset_m(mesh) * normals
     normals = np.ascontiguousarray(normals, dtype=float)
     grid_size = _grid_size_of(directions)
-    nodes, elements = [], []
     chunk = 64 * max(1, _MAX_BUILD_RAYS // (64 * len(middles)))  # elements a batch: whole words
     for begin in range(0, len(origins), chunk):
         end = min(begin + chunk, len(origins))
@@ -1251,11 +1287,8 @@ def _slit_gaps(mesh, corners, normals, raw_bits, directions, element_size_m):
         node, local = pairs(
             _cache_kernels.slit_gap_nodes, segments, grid_size, spacing / 2.0, element[escapes], segment[escapes]
         )
-        # Copies: a view would keep each batch's whole buffer (450 MB of them for 22 MB of pairs
-        # on the paper's mesh).
-        nodes.append(node.copy())
-        elements.append(local + begin)
-    return np.concatenate(nodes), np.concatenate(elements), n_rays
+        gaps.add(node, local + begin)
+    return n_rays
 
 
 def _split_where_partly_visible(mesh, corners, normals, tri, side, exposed, n_geo, directions, band, progress):
