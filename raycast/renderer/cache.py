@@ -918,9 +918,10 @@ def _build_pose(scene, directions, element_sizes_m, normal_step_rad, normal_quan
         words = _cache_kernels.pack_words(_unpacked(visibility[row_of[columns]], len(directions)).astype(bool) & above)
         raw_bits[:, begin // 64 : begin // 64 + words.shape[1]] = words
     del visibility  # the element-major copy: the bits and factors hold what the run time needs
-    gaps = _GapPairs(len(raw_columns))
-    gap_rays = _horizon_gaps(gaps, mesh, raw_corners, raw_geo, raw_bits, directions, band)
-    gap_rays += _slit_gaps(gaps, mesh, raw_corners, raw_geo, raw_bits, directions, element_size_m)
+    gaps, raycaster = _GapPairs(len(raw_columns)), open3d_scene(mesh)  # one scene for both searches
+    gap_rays = _horizon_gaps(gaps, mesh, raycaster, raw_corners, raw_geo, raw_bits, directions, band)
+    gap_rays += _slit_gaps(gaps, mesh, raycaster, raw_corners, raw_geo, raw_bits, directions, element_size_m)
+    del raycaster
     gap_ptr, gap_word, gap_mask = _gap_table(gaps.merged(), len(raw_columns), len(directions))
     del gaps
     return _Pose(
@@ -1026,7 +1027,7 @@ _GAP_RINGS = (0.25, 0.5)
 _SLIT_TILTS_DEG = (-60.0, -30.0, 0.0, 30.0, 60.0)
 
 
-def _horizon_gaps(gaps, mesh, corners, normals, raw_bits, directions, band):
+def _horizon_gaps(gaps, mesh, raycaster, corners, normals, raw_bits, directions, band):
     """Grid nodes close above a bit-held element's horizon where it sees out through a gap
     narrower than the grid.
 
@@ -1041,13 +1042,14 @@ def _horizon_gaps(gaps, mesh, corners, normals, raw_bits, directions, band):
     pairs already cast rays), and at run time (:func:`_lit_classes`) a pair with a gap node
     among its four nodes is decided by rays toward the exact direction.
 
-    Adds the gap pairs to ``gaps`` (a :class:`_GapPairs`; :func:`_gap_table` makes the run
-    time's table of them) and returns the number of rays cast.
+    Rays go into ``raycaster`` (the mesh's Open3D scene). Adds the gap pairs to ``gaps`` (a
+    :class:`_GapPairs`; :func:`_gap_table` makes the run time's table of them) and returns the
+    number of rays cast.
     """
     n_elements = len(corners)
     if n_elements == 0 or not _GAP_RINGS:
         return 0
-    raycaster, offset = open3d_scene(mesh), _ray_offset_m(mesh)
+    offset = _ray_offset_m(mesh)
     grid_size = _grid_size_of(directions)
     u, v = orthonormal_basis(directions)
     angles = 2.0 * np.pi * (np.arange(_GAP_PROBES) + 0.5 * np.arange(len(_GAP_RINGS))[:, None]) / _GAP_PROBES
@@ -1243,7 +1245,7 @@ def _connected_parts(vertex):
     return connected_components(graph, directed=False)[1][:n_triangles]
 
 
-def _slit_gaps(gaps, mesh, corners, normals, raw_bits, directions, element_size_m):
+def _slit_gaps(gaps, mesh, raycaster, corners, normals, raw_bits, directions, element_size_m):
     """Gap pairs of bit-held elements that see out through a slit (:func:`_slits`).
 
     Gaps up to the width the grid resolves from the far side of the mesh are taken (two radii
@@ -1255,12 +1257,12 @@ def _slit_gaps(gaps, mesh, corners, normals, raw_bits, directions, element_size_
     (:func:`raycast.renderer._cache_kernels.slit_gap_nodes`): at run time a pair with a gap
     node among its four nodes is decided by rays (:func:`_lit_classes`).
 
-    Adds the pairs to ``gaps`` (a :class:`_GapPairs`) and returns the number of rays cast.
+    Rays go into ``raycaster`` (the mesh's Open3D scene). Adds the pairs to ``gaps`` (a
+    :class:`_GapPairs`) and returns the number of rays cast.
     """
     if len(corners) == 0:
         return 0
     spacing = _grid_spacing_rad(directions)
-    raycaster = open3d_scene(mesh)
     segments, n_rays = _slits(mesh, raycaster, 2.0 * mesh.radius_m * spacing, element_size_m / 2.0)
     if len(segments) == 0:
         return n_rays
