@@ -504,8 +504,8 @@ class Mix(BRDF):
     fac : float in [0, 1], the node's Fac: the share of ``second``.
 
     The lobe a renderer samples for is the narrowest of the two whatever ``fac`` is (a fit that
-    frees ``fac`` builds its cache once, at any value), and a mix counts as a strong lobe
-    (:attr:`lobe_share` 1) when either input has one.
+    frees ``fac`` builds its cache once, at any value), and its :attr:`lobe_share` is the larger
+    of its lobed inputs' (``fac`` does not dilute it).
     """
 
     first: BRDF
