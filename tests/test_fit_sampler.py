@@ -194,7 +194,53 @@ def test_walkers_start_at_the_full_posteriors_mode_not_the_coarse_searchs(tmp_pa
     # The full posterior's phase width is ~0.7 deg (sigma / (A sqrt(n / 2)) radians).
     assert abs(starts[0][0] - 46.0) < 1.0 and "settle_evaluations" not in starts[0][1]
     assert abs(starts[300][0] - TRUTH["spin_phase_deg"]) < 2.0
-    assert 0 < starts[300][1]["settle_evaluations"] <= 300 and starts[300][1]["settle_log_prob_gain"] > 10.0
+    # (the best point and its half turn in the phase, each refined with at most 300 + 1)
+    assert 0 < starts[300][1]["settle_evaluations"] <= 2 * 301 and starts[300][1]["settle_log_prob_gain"] > 10.0
+
+
+@dataclass(frozen=True, eq=False)
+class TwoLobedModel:
+    """A body that looks nearly the same turned half a revolution: the light curve's second
+    harmonic dominates, and a small first harmonic tells phi from phi + 180 deg."""
+
+    t_s: np.ndarray
+    parameters = ("spin_period_s", "spin_phase_deg")
+
+    def magnitudes(self, values):
+        phase = 2 * np.pi * self.t_s / values["spin_period_s"] + np.radians(values["spin_phase_deg"])
+        return 0.5 * np.cos(2 * phase) + 0.05 * np.cos(phase)
+
+
+def _two_lobed_posterior(phase_deg: float, n: int, seed: int) -> Posterior:
+    model = TwoLobedModel(np.linspace(-15.0, 15.0, n))
+    err = np.full(n, 0.02)
+    noise = err * np.random.default_rng(seed).standard_normal(n)
+    mag = model.magnitudes({**TRUTH, "spin_phase_deg": phase_deg}) + 12.3 + noise
+    space = ParameterSpace.from_names(["spin_period_s", "spin_phase_deg"]).with_prior(
+        "spin_period_s", Uniform(9.0, 11.0)
+    )
+    return Posterior(space, model, GaussianLikelihood(mag, err))
+
+
+@pytest.mark.parametrize("init", ["search", "multistart"])
+def test_walkers_start_in_the_better_half_turn_when_the_coarse_search_prefers_the_other(tmp_path, init):
+    """The coarse posterior's data were drawn at the true phase turned half a revolution, so its
+    search ends there; refining the half turn too moves the start to the full posterior's mode,
+    which no local refinement from the coarse best reaches (the modes are 180 deg apart)."""
+    posterior = _two_lobed_posterior(TRUTH["spin_phase_deg"], n=150, seed=1)
+    coarse = _two_lobed_posterior(TRUTH["spin_phase_deg"] + 180.0, n=40, seed=2)
+    search = dict(search_maxiter=20, search_popsize=6, search_starts=64, search_polish=2, search_polish_evals=150)
+    starts = {}
+    for half_turns in (False, True):
+        settings = SamplerSettings(n_walkers=8, n_steps=2, init=init, seed=4, half_turns=half_turns, **search)
+        run = run_sampler(posterior, settings, tmp_path / f"{half_turns}.h5", progress=False, search_posterior=coarse)
+        starts[half_turns] = np.median(run.chain[0, :, 1]), run.init
+    assert abs(starts[False][0] - (TRUTH["spin_phase_deg"] + 180.0)) < 2.0 and "half_turns" not in starts[False][1]
+    assert abs(starts[True][0] - TRUTH["spin_phase_deg"]) < 2.0
+    assert starts[True][1]["half_turn_chosen"] == ["spin_phase_deg"]
+    unturned, turned = starts[True][1]["half_turns"]
+    # Turned, the first harmonic changes by 0.1 cos(phase): ln p by ~150 * (0.1 / 0.02)^2 / 4 = 940.
+    assert turned["phases"] == ["spin_phase_deg"] and 700.0 < turned["log_prob"] - unturned["log_prob"] < 1200.0
 
 
 def test_posterior_widths_match_the_fisher_matrix(tmp_path):

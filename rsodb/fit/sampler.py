@@ -29,6 +29,7 @@ from collections.abc import Callable, Mapping
 from concurrent.futures import ProcessPoolExecutor
 import contextlib
 from dataclasses import asdict, dataclass, field
+import itertools
 import json
 import math
 import multiprocessing
@@ -120,6 +121,14 @@ class SamplerSettings:
         The coarse posterior's best lies many posterior widths from the full one's (the paper
         mesh's Cycles pass: jitter 0.035 against 0.003 mag, P 7 sigma off), and walkers
         started there took ~700 of their steps to reach it.
+    half_turns : bool
+        ``init = "search"`` or ``"multistart"``: the search's best point is also turned half a
+        revolution in its free spin and precession phases (each alone and both together, see
+        `HALF_TURN_PHASES`), each turned point is refined on the full posterior like the best
+        one, and the walkers start at whichever of them is best. A body that looks nearly the
+        same turned half a revolution about its spin axis has a second mode there, which no
+        local refinement reaches across the ridge between them, and a coarse search posterior
+        can prefer the wrong one (a Cycles pass of the paper mesh, docs/fitting.md).
     ball_fraction : float
         Radius of the initial ball around the search's best point, as a fraction of each
         parameter's prior width.
@@ -147,6 +156,7 @@ class SamplerSettings:
     search_popsize: int = 15
     search_points: int = 60
     settle_evals: int = 300
+    half_turns: bool = True
     search_starts: int = 8192
     search_polish: int = 16
     search_polish_evals: int = 400
@@ -195,6 +205,8 @@ class SamplerSettings:
             )
         if not (0 < self.ball_fraction < 1):
             raise ValueError(f"sampler setting ball_fraction={self.ball_fraction!r} must be in (0, 1)")
+        if not isinstance(self.half_turns, bool):
+            raise ValueError(f"sampler setting half_turns={self.half_turns!r} must be true or false")
         if not isinstance(self.until_converged, bool):
             raise ValueError(f"sampler setting until_converged={self.until_converged!r} must be true or false")
         if not (
@@ -297,6 +309,18 @@ def _worker_cost(theta: np.ndarray) -> float:
     return -value if math.isfinite(value) else _IMPOSSIBLE
 
 
+def _worker_settle(start_and_evals: tuple[np.ndarray, int]) -> tuple[np.ndarray, float, float, int]:
+    return _settle(_WORKER_POSTERIORS[0], *start_and_evals)
+
+
+@dataclass(frozen=True, eq=False)
+class _InProcessSettle:
+    posterior: Any
+
+    def __call__(self, start_and_evals: tuple[np.ndarray, int]) -> tuple[np.ndarray, float, float, int]:
+        return _settle(self.posterior, *start_and_evals)
+
+
 @dataclass(frozen=True, eq=False)
 class _Cost:
     """-ln p for a minimiser, in this process; ``wrap``: phases wrapped into their turn first (a
@@ -321,13 +345,16 @@ class _Evaluator:
     progress: bool = False
     log_prob: Callable = field(init=False)
     cost: Callable = field(init=False)
+    settle: Callable = field(init=False)  # (start, evaluations) -> `_settle` on the full posterior
     map: Callable = field(init=False)
 
     def __post_init__(self):
         if self.pool is None:
             self.log_prob, self.cost, self.map = self.posterior, _Cost(self.search_posterior), map
+            self.settle = _InProcessSettle(self.posterior)
         else:
             self.log_prob, self.cost, self.map = _worker_log_prob, _worker_cost, self.pool.map
+            self.settle = _worker_settle
 
     def past_deadline(self) -> bool:
         return self.deadline is not None and time.perf_counter() >= self.deadline
@@ -545,32 +572,84 @@ _SETTLE_STEP_FRACTION = 1e-2
 _SETTLE_LOG_PROB_SPREAD = 0.1
 
 
-def _settled(best: np.ndarray, posterior, settings: SamplerSettings, evaluator: _Evaluator) -> tuple[np.ndarray, dict]:
-    """`best` (the coarse search's) refined on the full posterior by Nelder-Mead, in this
-    process (see ``SamplerSettings.settle_evals``); (point, facts for the run's init record)."""
-    if settings.settle_evals == 0 or evaluator.search_posterior is posterior:
-        return best, {}
+def _settle(posterior, start: np.ndarray, evaluations: int) -> tuple[np.ndarray, float, float, int]:
+    """`start` refined on `posterior` by a Nelder-Mead of at most `evaluations` evaluations (0:
+    not refined); (the better point, its cost, the start's cost, evaluations made)."""
     space = posterior.space
     cost = _Cost(posterior, wrap=True)
-    start_cost = cost(best)
+    start_cost = cost(start)
+    if evaluations == 0:
+        return start, start_cost, start_cost, 1
     step = (space.bounds[:, 1] - space.bounds[:, 0]) * _SETTLE_STEP_FRACTION
-    simplex = np.vstack([best, best + np.diag(step)])
+    simplex = np.vstack([start, start + np.diag(step)])
     found = minimize(
         cost,
-        best,
+        start,
         method="Nelder-Mead",
         options={
-            "maxfev": settings.settle_evals,
+            "maxfev": evaluations,
             "initial_simplex": _reflect_into(simplex, space.bounds, space.periods),
             "xatol": math.inf,
             "fatol": _SETTLE_LOG_PROB_SPREAD,
             "adaptive": True,
         },
     )
-    settled = space.wrap(found.x) if found.fun < start_cost else best
-    # (None where the coarse best had no full posterior at all: any finite point is a gain.)
-    gain = max(start_cost - float(found.fun), 0.0) if start_cost < _IMPOSSIBLE else None
-    return settled, {"settle_evaluations": int(found.nfev), "settle_log_prob_gain": gain}
+    if found.fun < start_cost:
+        return space.wrap(found.x), float(found.fun), start_cost, int(found.nfev) + 1
+    return start, start_cost, start_cost, int(found.nfev) + 1
+
+
+# The free phases `_half_turns` turns by half a revolution (see ``SamplerSettings.half_turns``).
+HALF_TURN_PHASES = ("spin_phase_deg", "precession_phase_deg")
+
+
+def _half_turns(best: np.ndarray, space) -> list[tuple[tuple[str, ...], np.ndarray]]:
+    """`best` turned half a revolution in each non-empty combination of its free phases named in
+    `HALF_TURN_PHASES`; (the phases turned, the point) for each."""
+    index = {name: i for i, name in enumerate(space.names)}
+    phases = [name for name in HALF_TURN_PHASES if name in index]
+    turned = []
+    for count in range(1, len(phases) + 1):
+        for combination in itertools.combinations(phases, count):
+            theta = np.array(best, dtype=float)
+            for name in combination:
+                theta[index[name]] += 0.5 * space.periods[index[name]]
+            turned.append((combination, space.wrap(theta)))
+    return turned
+
+
+def _settled(
+    best: np.ndarray, posterior, settings: SamplerSettings, evaluator: _Evaluator
+) -> tuple[np.ndarray, dict, int]:
+    """The walkers' centre: the search's `best` refined on the full posterior when the search ran
+    on a coarse one (``SamplerSettings.settle_evals``), or one of its half turns refined the same
+    way if that is better (``SamplerSettings.half_turns``); the refinements run through the
+    evaluator's map (in parallel in a pool). (centre, facts for the run's init record,
+    evaluations of the full posterior)."""
+    turned = _half_turns(best, posterior.space) if settings.half_turns else []
+    settle_best = settings.settle_evals > 0 and evaluator.search_posterior is not posterior
+    if not turned and not settle_best:
+        return best, {}, 0
+    jobs = [(best, settings.settle_evals if settle_best else 0)]
+    jobs += [(theta, settings.settle_evals) for _, theta in turned]
+    settled = list(evaluator.map(evaluator.settle, jobs))
+    chosen = int(np.argmin([cost for _, cost, _, _ in settled]))
+    centre, cost = settled[chosen][:2]
+    evaluations = sum(count for *_, count in settled)
+    info: dict = {}
+    if settings.settle_evals > 0:
+        start_cost = settled[0][2]
+        info["settle_evaluations"] = evaluations
+        # (None where the coarse best had no full posterior at all: any finite point is a gain.)
+        info["settle_log_prob_gain"] = max(start_cost - cost, 0.0) if start_cost < _IMPOSSIBLE else None
+    if turned:
+        phases_turned = [(), *(phases for phases, _ in turned)]
+        info["half_turns"] = [
+            {"phases": list(phases), "log_prob": -found[1] if found[1] < _IMPOSSIBLE else None}
+            for phases, found in zip(phases_turned, settled)
+        ]
+        info["half_turn_chosen"] = list(phases_turned[chosen])
+    return centre, info, evaluations
 
 
 def _walkers_around(
@@ -594,9 +673,9 @@ def _walkers_around_settled(
 ) -> tuple[np.ndarray, int, dict]:
     """`_walkers_around` the search's best point once `_settled` on the full posterior;
     (positions, evaluations of both, the settling's facts for the init record)."""
-    start, settling = _settled(best, posterior, settings, evaluator)
+    start, settling, settle_evaluations = _settled(best, posterior, settings, evaluator)
     positions, evaluations = _walkers_around(start, posterior, settings, rng, evaluator)
-    return positions, evaluations + settling.get("settle_evaluations", 0), settling
+    return positions, evaluations + settle_evaluations, settling
 
 
 def init_from_search(
