@@ -173,6 +173,32 @@ def test_inertial_spin_follows_the_iau_convention(axis):
     np.testing.assert_allclose(angular_velocity(backwards, t[2:]), [-2 * math.pi / 10.73 * pole], atol=1e-9)
 
 
+@pytest.mark.parametrize("axis", ["x", "y", "z"])
+def test_tilted_inertial_spin_turns_the_tilted_body_direction_about_the_pole(axis):
+    ra, dec, tilt, azimuth = math.radians(123.0), math.radians(-41.0), math.radians(17.0), math.radians(250.0)
+    model = InertialSpin(123.0, -41.0, 10.73, 30.0, axis, axis_tilt_deg=17.0, axis_tilt_azimuth_deg=250.0)
+    pole = np.array([math.cos(dec) * math.cos(ra), math.cos(dec) * math.sin(ra), math.sin(dec)])
+    k = "xyz".index(axis)
+    direction = np.zeros(3)  # the tilted spin axis in the body: from `axis` toward the next axes in cyclic order
+    direction[k] = math.cos(tilt)
+    direction[(k + 1) % 3] = math.sin(tilt) * math.cos(azimuth)
+    direction[(k + 2) % 3] = math.sin(tilt) * math.sin(azimuth)
+    t = np.linspace(0.0, 25.0, 11)
+    rotation = model.orientation(t)
+    np.testing.assert_allclose(rotation @ direction, np.broadcast_to(pole, (11, 3)), atol=1e-14)
+    np.testing.assert_allclose(angular_velocity(model, t[5:6]), [2 * math.pi / 10.73 * pole], atol=1e-9)
+    # The body axis itself circles the pole 17 deg away, once a period.
+    np.testing.assert_allclose(np.degrees(np.arccos(rotation[:, :, k] @ pole)), 17.0, atol=1e-9)
+    assert np.ptp(rotation[:, :, k] @ np.cross(pole, [0.0, 0.0, 1.0])) > 0.2
+    untilted = InertialSpin(123.0, -41.0, 10.73, 30.0, axis)
+    np.testing.assert_array_equal(dataclasses.replace(model, axis_tilt_deg=0.0).orientation(t), untilted.orientation(t))
+
+
+def test_tilted_inertial_spin_refuses_a_tilt_beyond_a_half_turn():
+    with pytest.raises(ValueError, match=r"axis_tilt_deg=190.0 must lie in \[0, 180\]"):
+        InertialSpin(0.0, 90.0, 10.0, axis_tilt_deg=190.0)
+
+
 # -- torque-free rigid body --------------------------------------------------------------------
 TRIAXIAL = (1200.0, 2000.0, 2600.0)  # kg m^2, a TOPEX-like bus scaled down
 SPIN = (0.30, 0.02, 0.40)  # rad/s: a ~13 s tumble near the maximum axis

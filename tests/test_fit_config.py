@@ -89,7 +89,7 @@ def test_defaults_and_overrides():
         ),
         (
             {"model": {"attitude": "wobble"}},
-            r"\[model\] attitude='wobble' is not one of precessing, inertial, torque_free",
+            r"\[model\] attitude='wobble' is not one of precessing, inertial, inertial_tilted, torque_free",
         ),
         ({"data": {"stride": 2}}, r"\[data\] stride is gone: a fixed stride strobes a periodic light curve"),
         ({"data": {"windows": -1}}, r"\[data\] windows=-1 must be 0 \(chosen\) or a whole number >= 1"),

@@ -83,6 +83,21 @@ def test_sphere_pass_magnitudes_follow_the_phase_angle_whatever_the_attitude(geo
     np.testing.assert_allclose(model.magnitudes(other), expected, atol=5e-3)
 
 
+def test_tilted_family_is_the_inertial_one_at_zero_tilt_and_differs_when_tilted(geometry):
+    box = ConvexFacets.box((1, 2, 3))
+    values = {"spin_period_s": 9.5, "spin_phase_deg": 40.0, "pole_ra_deg": 146.0, "pole_dec_deg": -57.0}
+    inertial = SpinStateModel(geometry, box, "inertial", {"spin_axis": "x"}).magnitudes(values)
+    tilted = SpinStateModel(geometry, box, "inertial_tilted", {"spin_axis": "x"})
+    level = tilted.magnitudes(dict(values, axis_tilt_deg=0.0, axis_tilt_azimuth_deg=123.0))
+    np.testing.assert_array_equal(level, inertial)
+    leaning = tilted.magnitudes(dict(values, axis_tilt_deg=15.0, axis_tilt_azimuth_deg=123.0))
+    assert np.sqrt(np.mean((leaning - inertial) ** 2)) > 0.02
+    assert set(ATTITUDES["inertial_tilted"].parameters) == set(ATTITUDES["inertial"].parameters) | {
+        "axis_tilt_deg",
+        "axis_tilt_azimuth_deg",
+    }
+
+
 def test_phases_are_defined_at_the_epoch(geometry):
     box = ConvexFacets.box((1, 2, 3))
     at_middle = SpinStateModel(geometry, box, "precessing")
@@ -178,7 +193,8 @@ def test_inject_builds_a_pass_from_the_model(topex_window, geometry):
 
 def test_model_validation_messages(geometry):
     with pytest.raises(
-        ValueError, match="unknown attitude model 'wobble'; use one of precessing, inertial, torque_free"
+        ValueError,
+        match="unknown attitude model 'wobble'; use one of precessing, inertial, inertial_tilted, torque_free",
     ):
         SpinStateModel(geometry, ConvexFacets.box(), "wobble")
     with pytest.raises(ValueError, match=r"attitude model 'torque_free' has no settings \['spin_axis'\]"):

@@ -83,6 +83,13 @@ def _zyz(phi: np.ndarray, theta: float, psi: np.ndarray) -> np.ndarray:
     return out
 
 
+def _tilt(tilt_deg: float, azimuth_deg: float) -> np.ndarray:
+    """(3, 3) Rz(a) @ Ry(-t) @ Rz(-a), in the spin frame's body-fixed coordinates: the body
+    direction (sin t cos a, sin t sin a, cos t) turned onto the spin axis +z."""
+    a, t = math.radians(azimuth_deg), math.radians(tilt_deg)
+    return rot_z(a) @ _zyz(0.0, -t, -a)
+
+
 def _pole_frame(ra_deg: float, dec_deg: float) -> np.ndarray:
     """(3, 3) Rz(ra + 90) @ Rx(90 - dec): columns node, (pole x node), pole in GCRS."""
     ra, dec = math.radians(ra_deg), math.radians(dec_deg)
@@ -184,7 +191,14 @@ class InertialSpin:
     phase_deg : float
         Angle W at ``t_s = 0`` from the node (``z x pole``) to the reference axis.
     spin_axis : {"x", "y", "z"}
-        Body axis that spins.
+        Body axis that spins, or from which the spin axis is tilted.
+    axis_tilt_deg : float
+        Angle between the spin axis and the body axis `spin_axis`, 0..180 (a body spinning
+        steadily about a principal axis of inertia that is none of its mesh's axes).
+    axis_tilt_azimuth_deg : float
+        Direction of that tilt about `spin_axis`, from the next body axis in cyclic order (x for
+        "z", y for "x", z for "y") toward the one after it: the spin axis in body coordinates
+        is (sin t cos a, sin t sin a, cos t) in those three axes.
     """
 
     pole_ra_deg: float
@@ -192,14 +206,18 @@ class InertialSpin:
     period_s: float
     phase_deg: float = 0.0
     spin_axis: str = "z"
+    axis_tilt_deg: float = 0.0
+    axis_tilt_azimuth_deg: float = 0.0
 
     def __post_init__(self):
         owner = "InertialSpin"
         object.__setattr__(self, "period_s", _check_period(owner, "period_s", self.period_s))
-        for name in ("pole_ra_deg", "pole_dec_deg", "phase_deg"):
+        for name in ("pole_ra_deg", "pole_dec_deg", "phase_deg", "axis_tilt_deg", "axis_tilt_azimuth_deg"):
             object.__setattr__(self, name, _check_angle(owner, name, getattr(self, name)))
         if not -90.0 <= self.pole_dec_deg <= 90.0:
             raise ValueError(f"InertialSpin: pole_dec_deg={self.pole_dec_deg!r} must lie in [-90, 90]")
+        if not 0.0 <= self.axis_tilt_deg <= 180.0:
+            raise ValueError(f"InertialSpin: axis_tilt_deg={self.axis_tilt_deg!r} must lie in [0, 180]")
         _check_axis(owner, self.spin_axis)
 
     def orientation(self, t_s, lvlh_gcrs=None) -> np.ndarray:
@@ -216,6 +234,8 @@ class InertialSpin:
         """
         t = np.asarray(t_s, dtype=float)
         spin = rot_z(_angle_rad(self.phase_deg, self.period_s, t))
+        if self.axis_tilt_deg != 0.0:
+            spin = np.matmul(spin, _tilt(self.axis_tilt_deg, self.axis_tilt_azimuth_deg))
         return np.matmul(_pole_frame(self.pole_ra_deg, self.pole_dec_deg), spin)[
             ..., _BODY_FROM_SPIN_COLUMNS[self.spin_axis]
         ]

@@ -50,7 +50,7 @@ frames beside the light curve.
 
 # rsodb.fit.model.ATTITUDES, named here so that 'rsodb --help' loads none of the library
 # (tests/test_cli_render.py checks that they agree).
-ATTITUDE_FAMILIES = ("precessing", "inertial", "torque_free")
+ATTITUDE_FAMILIES = ("precessing", "inertial", "inertial_tilted", "torque_free")
 # Command-line option of each attitude parameter (rsodb.fit.model.ATTITUDES) and its default.
 PARAMETER_OPTIONS = {
     "spin_period_s": ("--period-s", 10.0, "spin period, s (precessing: relative to the precessing frame)"),
@@ -58,8 +58,14 @@ PARAMETER_OPTIONS = {
     "precession_period_s": ("--precession-period-s", float("inf"), "precession period, s (inf: none)"),
     "precession_phase_deg": ("--precession-phase-deg", 0.0, "precession phase at the reference epoch, deg"),
     "precession_angle_deg": ("--precession-angle-deg", 0.0, "precession cone half-angle, deg"),
-    "pole_ra_deg": ("--pole-ra-deg", 0.0, "spin pole right ascension (inertial, torque_free), deg"),
-    "pole_dec_deg": ("--pole-dec-deg", 90.0, "spin pole declination (inertial, torque_free), deg"),
+    "pole_ra_deg": ("--pole-ra-deg", 0.0, "spin pole right ascension (inertial, inertial_tilted, torque_free), deg"),
+    "pole_dec_deg": ("--pole-dec-deg", 90.0, "spin pole declination (inertial, inertial_tilted, torque_free), deg"),
+    "axis_tilt_deg": ("--axis-tilt-deg", 0.0, "spin axis tilt from the body axis --spin-axis (inertial_tilted), deg"),
+    "axis_tilt_azimuth_deg": (
+        "--axis-tilt-azimuth-deg",
+        0.0,
+        "its direction about that axis, from the next body axis in cyclic order (inertial_tilted), deg",
+    ),
     "inertia_ratio_2": ("--inertia-ratio-2", 1.0, "I2/I1 (torque_free)"),
     "inertia_ratio_3": ("--inertia-ratio-3", 1.0, "I3/I1 (torque_free)"),
     "omega_polar_deg": ("--omega-polar-deg", 0.0, "angular velocity from body +z at the epoch (torque_free), deg"),

@@ -201,6 +201,18 @@ def _inertial(values, spin_axis="z"):
     )
 
 
+def _inertial_tilted(values, spin_axis="z"):
+    return InertialSpin(
+        pole_ra_deg=values["pole_ra_deg"],
+        pole_dec_deg=values["pole_dec_deg"],
+        period_s=values["spin_period_s"],
+        phase_deg=values["spin_phase_deg"],
+        spin_axis=spin_axis,
+        axis_tilt_deg=values["axis_tilt_deg"],
+        axis_tilt_azimuth_deg=values["axis_tilt_azimuth_deg"],
+    )
+
+
 def _torque_free_inertia(values) -> tuple[float, float, float]:
     return 1.0, values["inertia_ratio_2"], values["inertia_ratio_3"]
 
@@ -236,6 +248,22 @@ ATTITUDES: Mapping[str, AttitudeFamily] = MappingProxyType(
             _inertial,
             _always,
             "spin about a body axis fixed in inertial space (raycast.geometry.attitude.InertialSpin, pole RA/Dec in GCRS)",
+        ),
+        "inertial_tilted": AttitudeFamily(
+            (
+                "spin_period_s",
+                "spin_phase_deg",
+                "pole_ra_deg",
+                "pole_dec_deg",
+                "axis_tilt_deg",
+                "axis_tilt_azimuth_deg",
+            ),
+            ("spin_axis",),
+            _inertial_tilted,
+            _always,
+            "spin fixed in inertial space about a body direction tilted from a body axis (InertialSpin with "
+            "axis_tilt_deg): a body spinning steadily about a principal axis of inertia that is none of its "
+            "model's axes",
         ),
         "torque_free": AttitudeFamily(
             (

@@ -64,6 +64,20 @@ KNOWN: Mapping[str, Known] = MappingProxyType(
         "pole_dec_deg": Known(
             "Dec_pole", "deg", None, Uniform(-90.0, 90.0), "declination of an inertial spin pole (GCRS)"
         ),
+        "axis_tilt_deg": Known(
+            "tilt",
+            "deg",
+            None,
+            Uniform(0.0, 30.0),
+            "angle between the spin axis and the body axis named by spin_axis (inertial_tilted)",
+        ),
+        "axis_tilt_azimuth_deg": Known(
+            "tilt_az",
+            "deg",
+            360.0,
+            Uniform(0.0, 360.0),
+            "direction of that tilt about the body axis, from the next body axis in cyclic order (inertial_tilted)",
+        ),
         "inertia_ratio_2": Known(
             "I2/I1", "", None, Uniform(0.2, 5.0), "principal moment about body y over that about x"
         ),

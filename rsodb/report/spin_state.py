@@ -55,6 +55,7 @@ def axis_text(fit) -> str:
         ("precession_angle_deg", "cone", "deg"),
         ("pole_ra_deg", "pole RA", "deg"),
         ("pole_dec_deg", "Dec", "deg"),
+        ("axis_tilt_deg", "tilted", "deg"),
     ):
         value = _parameter(fit, name)
         if value is not None:
