@@ -129,7 +129,7 @@ def cycles_config(axis: str, args=None) -> dict:
     }
     if args.init != "search":  # (only when asked: the default start's configuration is as it was)
         sampler.update(init=args.init, search_starts=args.search_starts, search_polish=args.search_polish)
-    return {
+    config = {
         "name": "cycles",
         "band_draws": 0,
         "model": {"mesh": str(PAPER_OBJ), "materials": str(PAPER_MATERIALS), "spin_axis": axis, "n_sub": 1},
@@ -137,6 +137,9 @@ def cycles_config(axis: str, args=None) -> dict:
         "parameters": CYCLES_PRIORS,
         "sampler": sampler,
     }
+    if getattr(args, "correlation_time_s", 0.0):  # (only when asked: the default likelihood is as it was)
+        config["likelihood"] = {"correlation_time_s": args.correlation_time_s}
+    return config
 
 
 def find_windows(satellite, site, count: int) -> list:
@@ -525,6 +528,9 @@ def run_cycles(args, argv) -> int:
     # Each finished fit is appended to a journal at once, so a run that is stopped keeps its fits and
     # the next run with the same settings and forward-model code fits only the passes still missing.
     journal = directory / "recoveries.jsonl"
+    if args.passes:
+        chosen = set(args.passes)
+        records, configs = zip(*[(r, c) for r, c in zip(records, configs) if int(r["index"]) in chosen])
     done = load_journal(journal, records, configs)
     if done:
         print(f"{len(done)} of {len(records)} passes already fitted with these settings ({journal})")
@@ -584,12 +590,14 @@ def run_cycles(args, argv) -> int:
         f"{', '.join(n for n in names if not r.covered95[n]) or '-'} |"
         for i, (rec, r, noise) in enumerate(zip(records, recoveries, data_noise))
     )
-    for i, r in enumerate(recoveries):
+    for rec, r in zip(records, recoveries):
         missed = [n for n in names if not r.covered95[n]]
         print(
-            f"pass {i}: RMS {r.residual_rms_mag:.4f} mag, {r.autocorr_lengths:.0f} tau, outside 95%: {missed or 'none'}"
+            f"pass {rec['index']}: RMS {r.residual_rms_mag:.4f} mag, {r.autocorr_lengths:.0f} tau, outside 95%: {missed or 'none'}"
         )
-    if args.no_record:
+    if args.no_record or args.passes:
+        if args.passes and not args.no_record:
+            print("(some passes only: nothing recorded)")
         return 0
     coverage_figure(recoveries, CYCLES_FIGURE, names)
     load = os.getloadavg()
@@ -746,6 +754,13 @@ def command_line() -> argparse.ArgumentParser:
         "--time-limit-s", type=float, default=0.0, help="stop each fit after this (its search included)"
     )
     cycles.add_argument("--seed", type=int, default=0, help="seeds the truths, noise and Cycles")
+    cycles.add_argument(
+        "--correlation-time-s",
+        type=float,
+        default=0.0,
+        help="fit a correlated model error over this time too (its RMS free; default 0: none)",
+    )
+    cycles.add_argument("--passes", type=int, nargs="+", help="fit and report only these passes (indices)")
     return parser
 
 

@@ -77,6 +77,11 @@ def test_defaults_and_overrides():
     )
     assert pickle.loads(pickle.dumps(narrowed)).to_dict() == narrowed.to_dict()
     assert config.replace(sampler={"n_steps": 7}).sampler.n_steps == 7 and config.sampler.n_steps == 500
+    # A correlated model error adds its amplitude as a free parameter (prior 0-0.05 mag).
+    assert "model_error_mag" not in space.names + tuple(space.fixed)
+    correlated = FitConfig.from_dict({"likelihood": {"correlation_time_s": 2.5}})
+    error = correlated.parameter_space({}, FakePeriods()).free[-1]
+    assert error.name == "model_error_mag" and error.prior.bounds == (0.0, 0.05)
 
 
 @pytest.mark.parametrize(
@@ -90,6 +95,14 @@ def test_defaults_and_overrides():
         (
             {"model": {"attitude": "wobble"}},
             r"\[model\] attitude='wobble' is not one of precessing, inertial, inertial_tilted, torque_free",
+        ),
+        (
+            {"likelihood": {"correlation_time_s": -2}},
+            r"\[likelihood\] correlation_time_s=-2 must be seconds >= 0 \(0: no correlated model error\)",
+        ),
+        (
+            {"likelihood": {"kind": "normalised", "correlation_time_s": 2}},
+            r"\[likelihood\] correlation_time_s needs kind = 'gaussian', not 'normalised'",
         ),
         ({"data": {"stride": 2}}, r"\[data\] stride is gone: a fixed stride strobes a periodic light curve"),
         ({"data": {"windows": -1}}, r"\[data\] windows=-1 must be 0 \(chosen\) or a whole number >= 1"),

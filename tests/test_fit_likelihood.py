@@ -100,3 +100,67 @@ def test_factory_and_validation_messages():
         GaussianLikelihood([1.0, np.nan], [0.1, 0.1])
     with pytest.raises(ValueError, match="offset='free' is not one of marginalised, none"):
         GaussianLikelihood([1.0, 2.0], [0.1, 0.1], offset="free")
+
+
+# -- the correlated model error -----------------------------------------------------------------
+def _times(n: int) -> np.ndarray:
+    # Uneven spacing with a gap and a repeated time, as binned and windowed samples have.
+    steps = np.random.default_rng(7).uniform(0.05, 0.6, n - 1)
+    steps[10], steps[25] = 4.0, 0.0
+    return np.concatenate([[0.0], np.cumsum(steps)])
+
+
+def _dense_log_likelihood(residual, variance, t_s, error_mag, tau_s) -> float:
+    """ln N(residual; 0, C) with C = diag(variance) + error^2 exp(-|dt| / tau), by Cholesky."""
+    cov = np.diag(variance) + error_mag**2 * np.exp(-np.abs(t_s[:, None] - t_s[None, :]) / tau_s)
+    return float(stats.multivariate_normal(mean=np.zeros(residual.size), cov=cov).logpdf(residual))
+
+
+@pytest.mark.parametrize("error_mag, tau_s", [(0.05, 0.5), (0.3, 3.0), (0.01, 20.0)])
+def test_correlated_error_equals_the_dense_gaussian(data, error_mag, tau_s):
+    obs, err, model = data
+    t_s, jitter = _times(obs.size), 0.05
+    like = GaussianLikelihood(obs, err, "none", t_s, tau_s)
+    expected = _dense_log_likelihood(obs - model, err**2 + jitter**2, t_s, error_mag, tau_s)
+    assert like.log_likelihood(model, jitter, error_mag) == pytest.approx(expected, abs=1e-9)
+    assert like.parameters == ("jitter_mag", "model_error_mag")
+
+
+@pytest.mark.parametrize("error_mag, tau_s", [(0.05, 0.5), (0.3, 3.0)])
+def test_correlated_error_marginalised_offset_equals_numerical_integral(data, error_mag, tau_s):
+    obs, err, model = data
+    t_s, jitter = _times(obs.size), 0.02
+    marginal = GaussianLikelihood(obs, err, "marginalised", t_s, tau_s)
+    fixed = GaussianLikelihood(obs, err, "none", t_s, tau_s)
+    centre = float(np.mean(obs - model))
+    reference = fixed.log_likelihood(model + centre, jitter, error_mag)
+
+    def integrand(c):
+        return math.exp(fixed.log_likelihood(model + c, jitter, error_mag) - reference)
+
+    # The correlated error widens the offset's posterior up to ~error_mag; +-3 mag holds it all.
+    value, _ = integrate.quad(integrand, centre - 3.0, centre + 3.0, points=[centre], epsabs=0, epsrel=1e-12, limit=400)
+    assert marginal.log_likelihood(model, jitter, error_mag) == pytest.approx(reference + math.log(value), abs=1e-8)
+
+
+def test_correlated_error_of_zero_is_the_white_likelihood_and_differs_otherwise(data):
+    obs, err, model = data
+    white = GaussianLikelihood(obs, err)
+    correlated = GaussianLikelihood(obs, err, t_s=_times(obs.size), correlation_time_s=2.0)
+    assert correlated.log_likelihood(model, 0.05, 0.0) == white.log_likelihood(model, 0.05)
+    assert white.parameters == ("jitter_mag",)
+    # A slow model error explains part of a slow residual: here the likelihood rises with it.
+    drifted = model + 0.2 * np.sin(_times(obs.size) / 3.0)
+    assert correlated.log_likelihood(drifted, 0.05, 0.15) > correlated.log_likelihood(drifted, 0.05, 0.0) + 1.0
+
+
+def test_correlated_error_validation_messages(data):
+    obs, err, _ = data
+    with pytest.raises(ValueError, match="needs the sample times t_s"):
+        GaussianLikelihood(obs, err, correlation_time_s=1.0)
+    with pytest.raises(ValueError, match="t_s must be in time order"):
+        GaussianLikelihood(obs, err, t_s=_times(obs.size)[::-1], correlation_time_s=1.0)
+    with pytest.raises(ValueError, match=r"correlation_time_s=-1.0 must be seconds >= 0"):
+        GaussianLikelihood(obs, err, t_s=_times(obs.size), correlation_time_s=-1.0)
+    with pytest.raises(ValueError, match="needs the gaussian likelihood, not 'normalised'"):
+        make_likelihood("normalised", obs, err, t_s=_times(obs.size), correlation_time_s=1.0)

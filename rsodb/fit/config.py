@@ -140,12 +140,20 @@ class LikelihoodConfig:
 
     kind: str = "gaussian"
     offset: str = "marginalised"
+    correlation_time_s: float = 0.0
 
     def __post_init__(self):
         if self.kind not in LIKELIHOODS:
             raise ValueError(f"[likelihood] kind={self.kind!r} is not one of {', '.join(LIKELIHOODS)}")
         if self.offset not in OFFSET_MODES:
             raise ValueError(f"[likelihood] offset={self.offset!r} is not one of {', '.join(OFFSET_MODES)}")
+        tau = self.correlation_time_s
+        if isinstance(tau, bool) or not (isinstance(tau, (int, float)) and math.isfinite(tau) and tau >= 0):
+            raise ValueError(
+                f"[likelihood] correlation_time_s={tau!r} must be seconds >= 0 (0: no correlated model error)"
+            )
+        if tau > 0 and self.kind != "gaussian":
+            raise ValueError(f"[likelihood] correlation_time_s needs kind = 'gaussian', not {self.kind!r}")
 
 
 def _check_parameter_spec(name: str, spec) -> None:
@@ -280,6 +288,8 @@ class FitConfig:
         specs.update(shape_parameters)
         if self.likelihood.kind == "gaussian":
             specs["jitter_mag"] = DEFAULT_JITTER_PRIOR.to_dict()
+        if self.likelihood.correlation_time_s > 0:
+            specs["model_error_mag"] = "default"
         specs.update(self.parameters)
         return specs
 

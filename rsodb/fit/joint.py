@@ -39,7 +39,7 @@ import numpy as np
 
 from rsodb.fit.config import FitConfig
 from rsodb.fit.curves import pass_curves
-from rsodb.fit.likelihood import jitter_of
+from rsodb.fit.likelihood import jitter_of, model_error_of
 from rsodb.fit.parameters import Parameter, ParameterSpace
 from rsodb.fit.priors import Uniform
 from rsodb.fit.result import best_and_draws, chain_verdict, first_kept_step
@@ -123,7 +123,9 @@ class JointPosterior:
                 if not math.isfinite(log_p):
                     return -math.inf
             with np.errstate(divide="ignore", invalid="ignore"):
-                log_like = part.likelihood.log_likelihood(part.model.magnitudes(own), jitter_of(own))
+                log_like = part.likelihood.log_likelihood(
+                    part.model.magnitudes(own), jitter_of(own), model_error_of(own)
+                )
             if not math.isfinite(log_like):
                 return -math.inf
             log_p += log_like

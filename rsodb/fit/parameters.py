@@ -112,6 +112,13 @@ KNOWN: Mapping[str, Known] = MappingProxyType(
         "jitter_mag": Known(
             "s_jit", "mag", None, Uniform(0.0, 1.0), "extra Gaussian scatter added in quadrature to the observed errors"
         ),
+        "model_error_mag": Known(
+            "s_model",
+            "mag",
+            None,
+            Uniform(0.0, 0.05),
+            "RMS of the forward model's error, correlated over [likelihood] correlation_time_s",
+        ),
         "spin_period_rate_s_per_day": Known(
             "dP/dt",
             "s/day",

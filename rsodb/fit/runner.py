@@ -181,7 +181,14 @@ class FitProblem:
                 epoch_s,
             )
             mag, err = chosen.magnitudes(observed, config.data.mag_err_floor, point_model=n_sub == 1)
-            likelihood = make_likelihood(config.likelihood.kind, mag, err, config.likelihood.offset)
+            likelihood = make_likelihood(
+                config.likelihood.kind,
+                mag,
+                err,
+                config.likelihood.offset,
+                geometry.t_s,
+                config.likelihood.correlation_time_s,
+            )
             return Posterior(space, model, likelihood)
 
         posterior = posterior_on(selection, config.model.n_sub or None)
