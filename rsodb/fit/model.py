@@ -192,24 +192,15 @@ def _precessing(values, spin_axis="z"):
 
 
 def _inertial(values, spin_axis="z"):
+    # Both inertial families: the tilted one's values hold the tilt, the other's leave it at 0.
     return InertialSpin(
         pole_ra_deg=values["pole_ra_deg"],
         pole_dec_deg=values["pole_dec_deg"],
         period_s=values["spin_period_s"],
         phase_deg=values["spin_phase_deg"],
         spin_axis=spin_axis,
-    )
-
-
-def _inertial_tilted(values, spin_axis="z"):
-    return InertialSpin(
-        pole_ra_deg=values["pole_ra_deg"],
-        pole_dec_deg=values["pole_dec_deg"],
-        period_s=values["spin_period_s"],
-        phase_deg=values["spin_phase_deg"],
-        spin_axis=spin_axis,
-        axis_tilt_deg=values["axis_tilt_deg"],
-        axis_tilt_azimuth_deg=values["axis_tilt_azimuth_deg"],
+        axis_tilt_deg=values.get("axis_tilt_deg", 0.0),
+        axis_tilt_azimuth_deg=values.get("axis_tilt_azimuth_deg", 0.0),
     )
 
 
@@ -259,7 +250,7 @@ ATTITUDES: Mapping[str, AttitudeFamily] = MappingProxyType(
                 "axis_tilt_azimuth_deg",
             ),
             ("spin_axis",),
-            _inertial_tilted,
+            _inertial,
             _always,
             "spin fixed in inertial space about a body direction tilted from a body axis (InertialSpin with "
             "axis_tilt_deg): a body spinning steadily about a principal axis of inertia that is none of its "
