@@ -137,7 +137,7 @@ def cycles_config(axis: str, args=None) -> dict:
         "parameters": CYCLES_PRIORS,
         "sampler": sampler,
     }
-    if getattr(args, "correlation_time_s", 0.0):  # (only when asked: the default likelihood is as it was)
+    if args.correlation_time_s:  # (only when asked: the default likelihood is as it was)
         config["likelihood"] = {"correlation_time_s": args.correlation_time_s}
     return config
 
@@ -529,8 +529,11 @@ def run_cycles(args, argv) -> int:
     # the next run with the same settings and forward-model code fits only the passes still missing.
     journal = directory / "recoveries.jsonl"
     if args.passes:
-        chosen = set(args.passes)
-        records, configs = zip(*[(r, c) for r, c in zip(records, configs) if int(r["index"]) in chosen])
+        unknown = sorted(set(args.passes) - {int(r["index"]) for r in records})
+        if unknown:
+            print(f"--passes {unknown}: no such pass (there are {len(records)}, 0-{len(records) - 1})", file=sys.stderr)
+            return 2
+        records, configs = zip(*[(r, c) for r, c in zip(records, configs) if int(r["index"]) in set(args.passes)])
     done = load_journal(journal, records, configs)
     if done:
         print(f"{len(done)} of {len(records)} passes already fitted with these settings ({journal})")
