@@ -137,6 +137,10 @@ def cycles_config(axis: str, args=None) -> dict:
         "parameters": CYCLES_PRIORS,
         "sampler": sampler,
     }
+    if args.cache_accuracy_mag:  # (only when asked: the default model is as it was)
+        config["model"]["accuracy_mag"] = args.cache_accuracy_mag
+    if args.cache_grid_size:
+        config["model"]["grid_size"] = args.cache_grid_size
     if args.correlation_time_s:  # (only when asked: the default likelihood is as it was)
         config["likelihood"] = {"correlation_time_s": args.correlation_time_s}
     return config
@@ -377,6 +381,7 @@ def forward_model_at_truth(directory: Path, records: list[dict], argv, args) -> 
     from rsodb.fit.model import ConvexFacets, SpinStateModel
     from rsodb.fit.runner import FitProblem
     from rsodb.fit.shape_store import ShapeStore
+    from rsodb.fit.shapes import cache_grid_size
     from rsodb.rendering import load_scene
 
     scene = load_scene(str(PAPER_OBJ), str(PAPER_MATERIALS))
@@ -424,6 +429,9 @@ def forward_model_at_truth(directory: Path, records: list[dict], argv, args) -> 
         for rec, rms, worst, swing, accuracy, fit_rms, fit_worst in rows
     )
     axes = sorted({rec["axis"] for rec, *_ in rows})
+    config = FitConfig.from_dict(cycles_config("x", args))
+    cache_accuracy = config.model.accuracy_mag
+    cache_grid = config.model.grid_size or cache_grid_size(config.sampler.n_walkers * config.sampler.n_steps * 600)
     by_axis = {axis: float(np.median([row[1] for row in rows if row[0]["axis"] == axis])) for axis in axes}
     fit_by_axis = {axis: float(np.median([row[5] for row in rows if row[0]["axis"] == axis])) for axis in axes}
     section = f"""
@@ -431,7 +439,7 @@ def forward_model_at_truth(directory: Path, records: list[dict], argv, args) -> 
 
 The project's direct renderer of the published workflow's COSMOS 2502 mesh (accuracy 0.005 mag,
 0.01 where its pixel budget cannot reach 0.005), and the fit's own model of it (the cached renderer
-as a `--cycles` fit builds it, accuracy 0.01 mag, cube map of 32),
+as a `--cycles` fit builds it: tables to {cache_accuracy} mag, cube map of {cache_grid}),
 against the noiseless magnitudes Blender Cycles rendered of the same mesh along {len(rows)} passes of
 `--cycles` (120 s, 600 frames each), at the true spin state, after the median offset: the floor
 under any fit's residuals, before noise (0.02 mag) and before fitting.
@@ -764,6 +772,18 @@ def command_line() -> argparse.ArgumentParser:
         help="fit a correlated model error over this time too (its RMS free; default 0: none)",
     )
     cycles.add_argument("--passes", type=int, nargs="+", help="fit and report only these passes (indices)")
+    cycles.add_argument(
+        "--cache-accuracy-mag",
+        type=float,
+        default=0.0,
+        help="the fit's cached renderer: accuracy asked of its tables (default 0: the fit's own, 0.01 mag)",
+    )
+    cycles.add_argument(
+        "--cache-grid-size",
+        type=int,
+        default=0,
+        help="the fit's cached renderer: cube-map size (default 0: chosen from the fit's planned work)",
+    )
     return parser
 
 
