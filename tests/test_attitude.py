@@ -186,6 +186,7 @@ def test_tilted_inertial_spin_turns_the_tilted_body_direction_about_the_pole(axi
     t = np.linspace(0.0, 25.0, 11)
     rotation = model.orientation(t)
     np.testing.assert_allclose(rotation @ direction, np.broadcast_to(pole, (11, 3)), atol=1e-14)
+    np.testing.assert_allclose(model.spin_direction_body, direction, atol=1e-15)
     np.testing.assert_allclose(angular_velocity(model, t[5:6]), [2 * math.pi / 10.73 * pole], atol=1e-9)
     # The body axis itself circles the pole 17 deg away, once a period.
     np.testing.assert_allclose(np.degrees(np.arccos(rotation[:, :, k] @ pole)), 17.0, atol=1e-9)

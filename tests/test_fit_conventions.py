@@ -49,10 +49,16 @@ def test_orbit_frame_period_of_a_precessing_spin(grid, axis, theta):
         assert 40.5 * rates["orbit_frame"] - 1 == pytest.approx(0.0248, abs=1e-4)
 
 
-def test_inertial_spin_conventions(grid):
+@pytest.mark.parametrize("tilt", [0.0, 20.0])
+def test_inertial_spin_conventions(grid, tilt):
     _, geometry = grid
-    model = SpinStateModel(geometry, ConvexFacets.box(), "inertial", {"spin_axis": "z"}, (), "V", 1000.0)
+    family = "inertial_tilted" if tilt else "inertial"
+    model = SpinStateModel(geometry, ConvexFacets.box(), family, {"spin_axis": "z"}, (), "V", 1000.0)
     values = {"spin_period_s": 9.86, "spin_phase_deg": 0.0, "pole_ra_deg": 40.0, "pole_dec_deg": 25.0}
+    if tilt:
+        # The spin axis leans 20 deg in the body: the rates are about it, not about body z (whose
+        # projection would be cos 20 deg = 6% slow).
+        values |= {"axis_tilt_deg": tilt, "axis_tilt_azimuth_deg": 130.0}
     rates = rates_hz(model, values, geometry, "z")
     assert rates["inertial"] == pytest.approx(1 / 9.86, rel=1e-9)
     pole = np.array(

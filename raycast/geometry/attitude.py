@@ -38,6 +38,7 @@ __all__ = [
 SPIN_AXES = ("x", "y", "z")
 # Column order that relabels spin-frame columns (s1, s2, s3) as body columns (x, y, z).
 _BODY_FROM_SPIN_COLUMNS = {"z": [0, 1, 2], "x": [2, 0, 1], "y": [1, 2, 0]}
+_AXIS_INDEX = {"x": 0, "y": 1, "z": 2}
 
 
 # -- shared validation and rotation helpers -----------------------------------------------
@@ -176,6 +177,11 @@ class PrecessingSpin:
         spin_to_lvlh = _zyz(phi, math.radians(self.precession_angle_deg), psi)
         return np.matmul(lvlh, spin_to_lvlh)[..., _BODY_FROM_SPIN_COLUMNS[self.spin_axis]]
 
+    @property
+    def spin_direction_body(self) -> np.ndarray:
+        """(3,) the spin axis in body coordinates: the body axis `spin_axis`."""
+        return np.eye(3)[_AXIS_INDEX[self.spin_axis]]
+
 
 # -- inertially fixed spin axis ------------------------------------------------------------
 @dataclass(frozen=True)
@@ -239,6 +245,14 @@ class InertialSpin:
         return np.matmul(_pole_frame(self.pole_ra_deg, self.pole_dec_deg), spin)[
             ..., _BODY_FROM_SPIN_COLUMNS[self.spin_axis]
         ]
+
+    @property
+    def spin_direction_body(self) -> np.ndarray:
+        """(3,) the spin axis in body coordinates (the body direction that stays on the pole):
+        `spin_axis`, leaned by `axis_tilt_deg` toward `axis_tilt_azimuth_deg`."""
+        t, a = math.radians(self.axis_tilt_deg), math.radians(self.axis_tilt_azimuth_deg)
+        spin = np.array([math.sin(t) * math.cos(a), math.sin(t) * math.sin(a), math.cos(t)])
+        return spin[_BODY_FROM_SPIN_COLUMNS[self.spin_axis]]
 
 
 # -- torque-free rigid body -----------------------------------------------------------------

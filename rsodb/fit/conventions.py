@@ -22,8 +22,10 @@ period?", draws them):
 
 Each is computed from the fitted attitude itself, not from a formula per family: on a time grid
 over the fitted window (`STEPS_PER_CYCLE` steps per cycle of the fastest spin) the rotation
-from one step to the next (exact axis-angle of ``R_i^T R_(i+1)``) is projected on the body spin
-axis and summed; for ``light_curve`` the bisector's azimuth about the body spin axis is unwrapped.
+from one step to the next (exact axis-angle of ``R_i^T R_(i+1)``) is projected on the spin axis
+in body coordinates (the body axis ``spin_axis``, or for ``inertial_tilted`` the body direction
+leaned from it that stays on the pole) and summed; for ``light_curve`` the bisector's azimuth
+about that axis is unwrapped.
 Posterior draws give each convention's median and 16/84 percentiles.
 """
 
@@ -49,15 +51,33 @@ _MAX_STEPS = 20_000
 _AXES = {"x": 0, "y": 1, "z": 2}
 
 
-def angle_steps_about(rotations: np.ndarray, axis: int) -> np.ndarray:
-    """(n-1,) rotation angle (rad) about body `axis` between consecutive (n, 3, 3) body-to-frame
-    rotations: the axis-angle vector of ``R_i^T R_(i+1)`` projected on the axis."""
+def _about(axis) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(u, e1, e2): the unit spin direction in body coordinates and a right-handed basis of its
+    equator (u = e1 x e2). ``axis`` is a body axis index (then e1, e2 are the next two body axes
+    in cyclic order: x -> y, z) or a (3,) direction (e1 from the body axis after the one nearest
+    to it, so a direction on a body axis gives that axis's basis)."""
+    eye = np.eye(3)
+    if isinstance(axis, (int, np.integer)):
+        k = int(axis)
+        return eye[k], eye[(k + 1) % 3], eye[(k + 2) % 3]
+    u = np.asarray(axis, dtype=float)
+    u = u / np.linalg.norm(u)
+    hint = eye[(int(np.argmax(np.abs(u))) + 1) % 3]
+    e1 = hint - (hint @ u) * u
+    e1 /= np.linalg.norm(e1)
+    return u, e1, np.cross(u, e1)
+
+
+def angle_steps_about(rotations: np.ndarray, axis) -> np.ndarray:
+    """(n-1,) rotation angle (rad) about a body direction between consecutive (n, 3, 3)
+    body-to-frame rotations: the axis-angle vector of ``R_i^T R_(i+1)`` projected on it.
+    ``axis``: a body axis index or a (3,) direction in body coordinates."""
     step = np.einsum("nji,njk->nik", rotations[:-1], rotations[1:])
-    return Rotation.from_matrix(step).as_rotvec()[:, axis]
+    return Rotation.from_matrix(step).as_rotvec() @ _about(axis)[0]
 
 
-def bisector_azimuth(rotations: np.ndarray, geometry, axis: int) -> np.ndarray:
-    """(n,) unwrapped azimuth (rad) of the Sun-observer bisector about body `axis`, right-handed.
+def bisector_azimuth(rotations: np.ndarray, geometry, axis) -> np.ndarray:
+    """(n,) unwrapped azimuth (rad) of the Sun-observer bisector about a body direction, right-handed.
 
     Parameters
     ----------
@@ -65,17 +85,16 @@ def bisector_azimuth(rotations: np.ndarray, geometry, axis: int) -> np.ndarray:
         Body-to-GCRS rotations at the geometry's times.
     geometry : PassGeometry
         One sub-sample per time.
-    axis : int
-        0, 1, 2 for body x, y, z.
+    axis : int or (3,) float
+        0, 1, 2 for body x, y, z, or a direction in body coordinates (a tilted spin axis).
     """
     bisector = np.einsum("nji,nj->ni", rotations, geometry.sun_gcrs[:, 0] + geometry.obs_gcrs[:, 0])
-    # Cyclic order keeps the azimuth right-handed about the axis (x: y->z, y: z->x, z: x->y).
-    first, second = (axis + 1) % 3, (axis + 2) % 3
-    return np.unwrap(np.arctan2(bisector[:, second], bisector[:, first]))
+    _, first, second = _about(axis)
+    return np.unwrap(np.arctan2(bisector @ second, bisector @ first))
 
 
 def rates_hz(model, values, geometry, axis: str) -> dict[str, float]:
-    """Mean rotation rates (turns per second) about the body `axis` in each convention.
+    """Mean rotation rates (turns per second) about the spin axis in each convention.
 
     Parameters
     ----------
@@ -85,9 +104,11 @@ def rates_hz(model, values, geometry, axis: str) -> dict[str, float]:
     geometry : PassGeometry
         A fine time grid over the window, one sub-sample per time.
     axis : {"x", "y", "z"}
+        The family's body spin axis; where the attitude leans the spin axis away from it
+        (``inertial_tilted``), the rates are about the leaning axis (its ``spin_direction_body``).
     """
-    k = _AXES[axis]
     attitude = model.on(geometry).attitude_model(values)
+    k = getattr(attitude, "spin_direction_body", _AXES[axis])
     lvlh = geometry.lvlh_gcrs[:, 0]
     rotations = attitude.orientation(geometry.t_s, lvlh)
     span = float(geometry.t_s[-1] - geometry.t_s[0])

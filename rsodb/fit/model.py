@@ -150,6 +150,11 @@ class EpochShifted:
     def orientation(self, t_s, lvlh_gcrs=None):
         return self.attitude.orientation(np.asarray(t_s) - self.epoch_s, lvlh_gcrs)
 
+    @property
+    def spin_direction_body(self):
+        """The wrapped model's spin axis in body coordinates (AttributeError where it has none)."""
+        return self.attitude.spin_direction_body
+
 
 @dataclass(frozen=True)
 class AttitudeFamily:
