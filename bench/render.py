@@ -424,9 +424,11 @@ def scene_rows(
     seed=0,
     reference_cycles=REFERENCE_CYCLES,
     cycles_ladder=CYCLES_LADDER,
+    cache_grids=(32,),
 ):
     """Result rows of one comparison scene: Cycles at its reference and ladder settings, the
-    direct renderer at several pixel sizes, the fast path (if ``with_cache``), each on the
+    direct renderer at several pixel sizes, the fast path at each of ``cache_grids`` (its
+    cube-map sizes; if ``with_cache``), each on the
     tumble frames (Cycles on every ``tumble_stride``-th) and the hard frames. Without Cycles
     the reference is the direct renderer at its finest pixel size and only the fast path is
     compared with it."""
@@ -516,9 +518,9 @@ def scene_rows(
                 wall * 150 / len(fs),
                 setup_s=setup_cpu,
             )
-    if with_cache:
+    for grid in cache_grids if with_cache else ():
         tracemalloc.start()
-        cache, build_wall, build_cpu = timed(lambda: SceneCache.build(scene))
+        cache, build_wall, build_cpu = timed(lambda: SceneCache.build(scene, grid_size=grid))
         peak_mb = tracemalloc.get_traced_memory()[1] / 1e6
         tracemalloc.stop()
         for frames, fs in frame_sets.items():
@@ -528,7 +530,7 @@ def scene_rows(
             values = cache.intensity(fs.sun_body, fs.obs_body)
             row(
                 "cached",
-                "grid 32",
+                f"grid {grid}",
                 frames,
                 mag_difference(values, references[frames]),
                 cpu * 150 / len(timing_frames),
@@ -627,12 +629,12 @@ def scenes_figures(rows):
     for name in dict.fromkeys(r["scene"] for r in rows):
         mine = [r for r in rows if r["scene"] == name]
         direct = {r["frames"]: r for r in mine if r["method"] == "direct" and r["setting"].endswith("r/300")}
-        cached = {r["frames"]: r for r in mine if r["method"] == "cached"}
-        if cached:
-            c = cached["tumble"]
+        # One figure per cube-map size; the default grid keeps the figure's old name.
+        for c in (r for r in mine if r["method"] == "cached" and r["frames"] == "tumble"):
+            label = "" if c["setting"] == "grid 32" else f", {c['setting']}"
             figures.append(
                 figure(
-                    f"{name} fast path",
+                    f"{name} fast path{label}",
                     f"tumble {c['rms_mag']:.4f} RMS / {c['max_mag']:.4f} max mag, {1e3 * c['wall_s']:.1f} ms wall "
                     f"({1e3 * c['cpu_s']:.0f} ms CPU), "
                     f"build peak {c['build_peak_mb']:.1f} MB for {c['tables_mb']:.1f} MB of tables"
@@ -680,6 +682,7 @@ def run_scenes(args, argv):
             with_cycles=not args.no_cycles,
             reference_cycles=args.cycles_reference,
             cycles_ladder=args.cycles_ladder,
+            cache_grids=args.cache_grids,
         )
         if partial:
             partial.write_text(json.dumps(rows))
@@ -732,6 +735,12 @@ def main(argv=None):
     parser.add_argument("--per-kind", type=int, default=4, help="with --scenes: hard frames of each kind")
     parser.add_argument("--no-cache", default="", help="with --scenes: scenes (joined by commas) without the fast path")
     parser.add_argument("--partial", help="with --scenes: a JSON file of finished scenes' rows, read and extended")
+    parser.add_argument(
+        "--cache-grids",
+        type=lambda text: tuple(int(part) for part in text.split(",")),
+        default=(32,),
+        help="with --scenes: the fast path's cube-map sizes, joined by commas (default 32)",
+    )
     parser.add_argument(
         "--cycles-reference",
         type=cycles_setting,
