@@ -144,6 +144,12 @@ def test_cycles_fit_configuration_takes_any_callers_settings():
     }
     parsed = FitConfig.from_dict(config)
     assert (parsed.sampler.n_walkers, parsed.sampler.n_steps, parsed.sampler.until_converged) == (20, 500, True)
+    # The fit's cache settings reach the model only when asked (the default keys, and so the
+    # stored caches' keys, stay as they were).
+    finer = FitConfig.from_dict(cycles_config("x", command_line().parse_args(["--cache-grid-size", "96"])))
+    assert (finer.model.grid_size, finer.model.accuracy_mag) == (96, 0.01)
+    sharper = FitConfig.from_dict(cycles_config("x", command_line().parse_args(["--cache-accuracy-mag", "0.005"])))
+    assert (sharper.model.grid_size, sharper.model.accuracy_mag) == (0, 0.005)
 
 
 def test_noisy_cycles_frames_are_rendered_again_with_more_samples():
