@@ -518,11 +518,6 @@ def scene_rows(
                 wall * 150 / len(fs),
                 setup_s=setup_cpu,
             )
-    if with_cache:
-        # A process's first build makes one-off allocations (compiled kernels and their state:
-        # 37 MB on the bus, 3.5x its tables in the run of 2026-11-28); a build on a 4-node grid
-        # (2 s on the bus) makes them before the traced build, which then measures the build.
-        SceneCache.build(scene, grid_size=4)
     for grid in cache_grids if with_cache else ():
         tracemalloc.start()
         cache, build_wall, build_cpu = timed(lambda: SceneCache.build(scene, grid_size=grid))
