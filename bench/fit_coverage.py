@@ -381,7 +381,6 @@ def forward_model_at_truth(directory: Path, records: list[dict], argv, args) -> 
     from rsodb.fit.model import ConvexFacets, SpinStateModel
     from rsodb.fit.runner import FitProblem
     from rsodb.fit.shape_store import ShapeStore
-    from rsodb.fit.shapes import cache_grid_size
     from rsodb.rendering import load_scene
 
     scene = load_scene(str(PAPER_OBJ), str(PAPER_MATERIALS))
@@ -409,6 +408,8 @@ def forward_model_at_truth(directory: Path, records: list[dict], argv, args) -> 
             FitConfig.from_dict(cycles_config(rec["axis"], args)),
             store=ShapeStore(str(directory / "shapes")),
         )
+        # The settings of the cache this fit really built (the same for every pass).
+        cache_accuracy, cache_grid = problem.config.model.accuracy_mag, problem.posterior.model.brightness.grid_size
         values = dict(problem.posterior.space.fixed, **rec["truth"])
         cached = problem.posterior.model.magnitudes(values) - data["clean_mag"]
         cached = cached[np.isfinite(cached)] - np.median(cached[np.isfinite(cached)])
@@ -429,9 +430,6 @@ def forward_model_at_truth(directory: Path, records: list[dict], argv, args) -> 
         for rec, rms, worst, swing, accuracy, fit_rms, fit_worst in rows
     )
     axes = sorted({rec["axis"] for rec, *_ in rows})
-    config = FitConfig.from_dict(cycles_config("x", args))
-    cache_accuracy = config.model.accuracy_mag
-    cache_grid = config.model.grid_size or cache_grid_size(config.sampler.n_walkers * config.sampler.n_steps * 600)
     by_axis = {axis: float(np.median([row[1] for row in rows if row[0]["axis"] == axis])) for axis in axes}
     fit_by_axis = {axis: float(np.median([row[5] for row in rows if row[0]["axis"] == axis])) for axis in axes}
     section = f"""
@@ -537,11 +535,12 @@ def run_cycles(args, argv) -> int:
     # the next run with the same settings and forward-model code fits only the passes still missing.
     journal = directory / "recoveries.jsonl"
     if args.passes:
-        unknown = sorted(set(args.passes) - {int(r["index"]) for r in records})
+        chosen = set(args.passes)
+        unknown = sorted(chosen - {int(r["index"]) for r in records})
         if unknown:
             print(f"--passes {unknown}: no such pass (there are {len(records)}, 0-{len(records) - 1})", file=sys.stderr)
             return 2
-        records, configs = zip(*[(r, c) for r, c in zip(records, configs) if int(r["index"]) in set(args.passes)])
+        records, configs = zip(*[(r, c) for r, c in zip(records, configs) if int(r["index"]) in chosen])
     done = load_journal(journal, records, configs)
     if done:
         print(f"{len(done)} of {len(records)} passes already fitted with these settings ({journal})")

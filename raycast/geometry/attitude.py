@@ -38,7 +38,6 @@ __all__ = [
 SPIN_AXES = ("x", "y", "z")
 # Column order that relabels spin-frame columns (s1, s2, s3) as body columns (x, y, z).
 _BODY_FROM_SPIN_COLUMNS = {"z": [0, 1, 2], "x": [2, 0, 1], "y": [1, 2, 0]}
-_AXIS_INDEX = {"x": 0, "y": 1, "z": 2}
 
 
 # -- shared validation and rotation helpers -----------------------------------------------
@@ -89,6 +88,14 @@ def _tilt(tilt_deg: float, azimuth_deg: float) -> np.ndarray:
     direction (sin t cos a, sin t sin a, cos t) turned onto the spin axis +z."""
     a, t = math.radians(azimuth_deg), math.radians(tilt_deg)
     return rot_z(a) @ _zyz(0.0, -t, -a)
+
+
+def _spin_direction_body(spin_axis: str, tilt_deg: float = 0.0, azimuth_deg: float = 0.0) -> np.ndarray:
+    """(3,) body coordinates of the spin frame's +z: the spin-frame direction (sin t cos a,
+    sin t sin a, cos t) that :func:`_tilt` turns onto +z, its columns relabelled as body axes."""
+    t, a = math.radians(tilt_deg), math.radians(azimuth_deg)
+    spin = np.array([math.sin(t) * math.cos(a), math.sin(t) * math.sin(a), math.cos(t)])
+    return spin[_BODY_FROM_SPIN_COLUMNS[spin_axis]]
 
 
 def _pole_frame(ra_deg: float, dec_deg: float) -> np.ndarray:
@@ -180,7 +187,7 @@ class PrecessingSpin:
     @property
     def spin_direction_body(self) -> np.ndarray:
         """(3,) the spin axis in body coordinates: the body axis `spin_axis`."""
-        return np.eye(3)[_AXIS_INDEX[self.spin_axis]]
+        return _spin_direction_body(self.spin_axis)
 
 
 # -- inertially fixed spin axis ------------------------------------------------------------
@@ -250,9 +257,7 @@ class InertialSpin:
     def spin_direction_body(self) -> np.ndarray:
         """(3,) the spin axis in body coordinates (the body direction that stays on the pole):
         `spin_axis`, leaned by `axis_tilt_deg` toward `axis_tilt_azimuth_deg`."""
-        t, a = math.radians(self.axis_tilt_deg), math.radians(self.axis_tilt_azimuth_deg)
-        spin = np.array([math.sin(t) * math.cos(a), math.sin(t) * math.sin(a), math.cos(t)])
-        return spin[_BODY_FROM_SPIN_COLUMNS[self.spin_axis]]
+        return _spin_direction_body(self.spin_axis, self.axis_tilt_deg, self.axis_tilt_azimuth_deg)
 
 
 # -- torque-free rigid body -----------------------------------------------------------------

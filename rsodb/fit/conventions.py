@@ -53,14 +53,11 @@ _AXES = {"x": 0, "y": 1, "z": 2}
 
 def _about(axis) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(u, e1, e2): the unit spin direction in body coordinates and a right-handed basis of its
-    equator (u = e1 x e2). ``axis`` is a body axis index (then e1, e2 are the next two body axes
-    in cyclic order: x -> y, z) or a (3,) direction (e1 from the body axis after the one nearest
-    to it, so a direction on a body axis gives that axis's basis)."""
+    equator (u = e1 x e2). ``axis`` is a body axis index or a (3,) direction; e1 is the body axis
+    after the one nearest to u, made perpendicular to it, so for a body axis e1, e2 are the next
+    two in cyclic order (x -> y, z)."""
     eye = np.eye(3)
-    if isinstance(axis, (int, np.integer)):
-        k = int(axis)
-        return eye[k], eye[(k + 1) % 3], eye[(k + 2) % 3]
-    u = np.asarray(axis, dtype=float)
+    u = eye[int(axis)] if isinstance(axis, (int, np.integer)) else np.asarray(axis, dtype=float)
     u = u / np.linalg.norm(u)
     hint = eye[(int(np.argmax(np.abs(u))) + 1) % 3]
     e1 = hint - (hint @ u) * u
