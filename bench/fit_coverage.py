@@ -143,6 +143,8 @@ def cycles_config(axis: str, args=None) -> dict:
         config["model"]["grid_size"] = args.cache_grid_size
     if args.correlation_time_s:  # (only when asked: the default likelihood is as it was)
         config["likelihood"] = {"correlation_time_s": args.correlation_time_s}
+    if args.flux_error:
+        config.setdefault("likelihood", {})["flux_error"] = True
     return config
 
 
@@ -769,6 +771,11 @@ def command_line() -> argparse.ArgumentParser:
         type=float,
         default=0.0,
         help="fit a correlated model error over this time too (its RMS free; default 0: none)",
+    )
+    cycles.add_argument(
+        "--flux-error",
+        action="store_true",
+        help="fit the model's error in flux too (a fraction of its brightest sample, free; default: none)",
     )
     cycles.add_argument("--passes", type=int, nargs="+", help="fit and report only these passes (indices)")
     cycles.add_argument(

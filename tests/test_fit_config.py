@@ -82,6 +82,12 @@ def test_defaults_and_overrides():
     correlated = FitConfig.from_dict({"likelihood": {"correlation_time_s": 2.5}})
     error = correlated.parameter_space({}, FakePeriods()).free[-1]
     assert error.name == "model_error_mag" and error.prior.bounds == (0.0, 0.05)
+    # So does the model's flux error (a fraction of its brightest sample, prior 0-0.02).
+    assert "model_flux_error" not in space.names + tuple(space.fixed)
+    flux = FitConfig.from_dict({"likelihood": {"flux_error": True}})
+    error = flux.parameter_space({}, FakePeriods()).free[-1]
+    assert error.name == "model_flux_error" and error.prior.bounds == (0.0, 0.02)
+    assert FitConfig.from_dict(flux.to_dict()).likelihood.flux_error is True
 
 
 @pytest.mark.parametrize(
@@ -103,6 +109,11 @@ def test_defaults_and_overrides():
         (
             {"likelihood": {"kind": "normalised", "correlation_time_s": 2}},
             r"\[likelihood\] correlation_time_s needs kind = 'gaussian', not 'normalised'",
+        ),
+        ({"likelihood": {"flux_error": "yes"}}, r"\[likelihood\] flux_error='yes' must be true or false"),
+        (
+            {"likelihood": {"kind": "normalised", "flux_error": True}},
+            r"\[likelihood\] flux_error needs kind = 'gaussian', not 'normalised'",
         ),
         ({"data": {"stride": 2}}, r"\[data\] stride is gone: a fixed stride strobes a periodic light curve"),
         ({"data": {"windows": -1}}, r"\[data\] windows=-1 must be 0 \(chosen\) or a whole number >= 1"),

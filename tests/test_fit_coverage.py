@@ -150,6 +150,11 @@ def test_cycles_fit_configuration_takes_any_callers_settings():
     assert (finer.model.grid_size, finer.model.accuracy_mag) == (96, 0.01)
     sharper = FitConfig.from_dict(cycles_config("x", command_line().parse_args(["--cache-accuracy-mag", "0.005"])))
     assert (sharper.model.grid_size, sharper.model.accuracy_mag) == (0, 0.005)
+    # So do the likelihood's model-error terms.
+    plain = FitConfig.from_dict(cycles_config("x", command_line().parse_args([])))
+    assert not plain.likelihood.flux_error and plain.likelihood.correlation_time_s == 0
+    flux = FitConfig.from_dict(cycles_config("x", command_line().parse_args(["--flux-error"])))
+    assert flux.likelihood.flux_error and flux.likelihood.correlation_time_s == 0
 
 
 def test_noisy_cycles_frames_are_rendered_again_with_more_samples():

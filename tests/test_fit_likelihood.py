@@ -164,3 +164,90 @@ def test_correlated_error_validation_messages(data):
         GaussianLikelihood(obs, err, t_s=_times(obs.size), correlation_time_s=-1.0)
     with pytest.raises(ValueError, match="needs the gaussian likelihood, not 'normalised'"):
         make_likelihood("normalised", obs, err, t_s=_times(obs.size), correlation_time_s=1.0)
+
+
+# -- the model's error in flux ------------------------------------------------------------------
+@pytest.fixture()
+def deep():
+    """A light curve 5 mag deep: the model's flux error matters only where it is faint."""
+    rng = np.random.default_rng(3)
+    n = 3000
+    t_s = np.linspace(0.0, 300.0, n)
+    model = 8.0 + 2.5 * (1.0 - np.cos(2 * np.pi * t_s / 37.0))
+    err = np.full(n, 0.02)
+    return rng, t_s, model, err
+
+
+def test_flux_error_in_magnitudes_grows_as_the_model_fades():
+    from rsodb.fit.likelihood import flux_error_mag
+
+    # 2.5 / ln 10 * f * 10^(0.4 (m - min m)): 1x, 10^0.4x and 10x at 0, 1 and 2.5 mag below the peak.
+    scale = 2.5 / math.log(10.0) * 0.01
+    got = flux_error_mag(np.array([11.0, 10.0, 12.5, np.inf]), 0.01)
+    assert got[:3] == pytest.approx(scale * np.array([10**0.4, 1.0, 10.0]), rel=1e-14)
+    assert got[3] == math.inf
+
+
+def test_flux_error_adds_its_variance_to_each_sample(deep):
+    rng, t_s, model, err = deep
+    obs = model + err * rng.standard_normal(model.size)
+    fraction, jitter = 0.004, 0.01
+    sigma = np.sqrt(err**2 + jitter**2 + (2.5 / math.log(10.0) * fraction * 10 ** (0.4 * (model - model.min()))) ** 2)
+    like = GaussianLikelihood(obs, err, offset="none", flux_error=True)
+    expected = np.sum(stats.norm.logpdf(obs, loc=model, scale=sigma))
+    assert like.log_likelihood(model, jitter, 0.0, fraction) == pytest.approx(expected, rel=1e-12)
+    assert like.parameters == ("jitter_mag", "model_flux_error")
+    # The offset neither moves the term (it is relative to the model's own brightest sample) nor
+    # is it left out of the best offset's weights.
+    marginal = GaussianLikelihood(obs, err, flux_error=True)
+    assert marginal.log_likelihood(model + 0.3, jitter, 0.0, fraction) == pytest.approx(
+        marginal.log_likelihood(model, jitter, 0.0, fraction), abs=1e-9
+    )
+    w = 1.0 / sigma**2
+    assert marginal.offset_mag(model, jitter, fraction) == pytest.approx(np.sum(w * (obs - model)) / np.sum(w))
+    assert marginal.compared(model, jitter, fraction)[2] == pytest.approx(sigma, rel=1e-12)
+    # Off (the default), the term is ignored whatever value is passed.
+    white = GaussianLikelihood(obs, err)
+    assert white.log_likelihood(model, jitter, 0.0, fraction) == white.log_likelihood(model, jitter)
+
+
+def test_flux_error_enters_the_correlated_likelihood_as_white_variance(deep):
+    rng, t_s, model, err = deep
+    # The first 300 samples (a dense 3000^2 reference is slow); they hold the brightest (t = 0).
+    t_s, model, err = t_s[:300], model[:300], err[:300]
+    obs, fraction = model + err * rng.standard_normal(model.size), 0.003
+    like = GaussianLikelihood(obs, err, "none", t_s, 5.0, flux_error=True)
+    variance = err**2 + (2.5 / math.log(10.0) * fraction * 10 ** (0.4 * (model - model.min()))) ** 2
+    expected = _dense_log_likelihood(obs - model, variance, t_s, 0.02, 5.0)
+    assert like.log_likelihood(model, 0.0, 0.02, fraction) == pytest.approx(expected, abs=1e-8)
+    assert like.log_likelihood(model, 0.0, 0.02, 0.0) != pytest.approx(expected, abs=1e-3)
+    assert like.parameters == ("jitter_mag", "model_error_mag", "model_flux_error")
+
+
+def test_a_dark_model_sample_is_not_forgiven_by_the_flux_error(deep):
+    rng, t_s, model, err = deep
+    like = GaussianLikelihood(model + 0.01, err, flux_error=True)
+    dark = model.copy()
+    dark[100] = np.inf
+    assert like.log_likelihood(dark, 0.0, 0.0, 0.01) == -math.inf
+
+
+def test_injected_flux_error_is_recovered(deep):
+    """Data scattered by a model error of 0.5% of the peak flux (plus 0.02 mag noise): the
+    likelihood's best flux error over a grid lands within 15% of it, and a fit without the
+    term would need a jitter (the same at every sample) far above the bright samples' scatter."""
+    rng, t_s, model, err = deep
+    fraction = 0.005
+    flux = 10 ** (-0.4 * (model - model.min()))
+    scattered = flux + fraction * rng.standard_normal(model.size)
+    keep = scattered > 0.2 * fraction  # (a flux error cannot take a sample below zero in magnitudes)
+    obs = model.min() - 2.5 * np.log10(scattered[keep]) + err[keep] * rng.standard_normal(keep.sum())
+    like = GaussianLikelihood(obs, err[keep], flux_error=True)
+    grid = np.linspace(0.001, 0.012, 221)
+    values = [like.log_likelihood(model[keep], 0.0, 0.0, f) for f in grid]
+    assert grid[int(np.argmax(values))] == pytest.approx(fraction, rel=0.15)
+    white = GaussianLikelihood(obs, err[keep])
+    jitters = np.linspace(0.0, 0.5, 501)
+    best_jitter = jitters[int(np.argmax([white.log_likelihood(model[keep], j) for j in jitters]))]
+    assert best_jitter > 0.05  # the faint samples' scatter, spread over every sample
+    assert max(values) > max(white.log_likelihood(model[keep], j) for j in jitters) + 50.0

@@ -141,6 +141,7 @@ class LikelihoodConfig:
     kind: str = "gaussian"
     offset: str = "marginalised"
     correlation_time_s: float = 0.0
+    flux_error: bool = False
 
     def __post_init__(self):
         if self.kind not in LIKELIHOODS:
@@ -154,6 +155,10 @@ class LikelihoodConfig:
             )
         if tau > 0 and self.kind != "gaussian":
             raise ValueError(f"[likelihood] correlation_time_s needs kind = 'gaussian', not {self.kind!r}")
+        if not isinstance(self.flux_error, bool):
+            raise ValueError(f"[likelihood] flux_error={self.flux_error!r} must be true or false")
+        if self.flux_error and self.kind != "gaussian":
+            raise ValueError(f"[likelihood] flux_error needs kind = 'gaussian', not {self.kind!r}")
 
 
 def _check_parameter_spec(name: str, spec) -> None:
@@ -290,6 +295,8 @@ class FitConfig:
             specs["jitter_mag"] = DEFAULT_JITTER_PRIOR.to_dict()
         if self.likelihood.correlation_time_s > 0:
             specs["model_error_mag"] = "default"
+        if self.likelihood.flux_error:
+            specs["model_flux_error"] = "default"
         specs.update(self.parameters)
         return specs
 

@@ -21,7 +21,7 @@ import math
 import numpy as np
 
 from raycast.geometry.pass_geometry import PassGeometry, orbit_of
-from rsodb.fit.likelihood import jitter_of
+from rsodb.fit.likelihood import flux_error_of, jitter_of
 from rsodb.fit.selection import usable_samples
 
 __all__ = ["PassCurve", "ModelCurve", "BAND_LEVELS", "pass_curves", "geometry_at", "fine_times"]
@@ -147,7 +147,7 @@ def pass_curves(posterior, observed, selection, best_theta, draws, *, n_sub: int
 
     def aligned(theta, on_model):
         values = space.values(theta)
-        offset = likelihood.offset_mag(model.magnitudes(values), jitter_of(values))
+        offset = likelihood.offset_mag(model.magnitudes(values), jitter_of(values), flux_error_of(values))
         return on_model.magnitudes(values) + offset
 
     # Saturated samples outside the window are drawn too; they are never fitted.

@@ -39,7 +39,7 @@ import numpy as np
 
 from rsodb.fit.config import FitConfig
 from rsodb.fit.curves import pass_curves
-from rsodb.fit.likelihood import jitter_of, model_error_of
+from rsodb.fit.likelihood import flux_error_of, jitter_of, model_error_of
 from rsodb.fit.parameters import Parameter, ParameterSpace
 from rsodb.fit.priors import Uniform
 from rsodb.fit.result import best_and_draws, chain_verdict, first_kept_step
@@ -124,7 +124,7 @@ class JointPosterior:
                     return -math.inf
             with np.errstate(divide="ignore", invalid="ignore"):
                 log_like = part.likelihood.log_likelihood(
-                    part.model.magnitudes(own), jitter_of(own), model_error_of(own)
+                    part.model.magnitudes(own), jitter_of(own), model_error_of(own), flux_error_of(own)
                 )
             if not math.isfinite(log_like):
                 return -math.inf

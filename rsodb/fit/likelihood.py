@@ -36,6 +36,16 @@
     and ``c_hat = 1^T C^-1 r / W`` (the filter run on the residuals and on a vector of ones).
     With ``model_error_mag = 0`` this is the white likelihood above.
 
+    A model error in flux. With ``flux_error`` the white variance of each sample also holds
+    ``(1.0857 f F_max / F_i)^2``: an error of the forward model of ``f`` times its brightest
+    sample's flux, the same in flux at every sample, so in magnitudes it grows as the model
+    fades (``F_max / F_i = 10^(0.4 (m_i - min m))`` from the model's own magnitudes, so the
+    offset leaves it alone). A renderer's error is of this kind where it is a shadow or a limb
+    moved by a fraction of an element: on the Cycles passes of the paper's COSMOS 2502 mesh the
+    fit's cached model is 0.004 mag off at the brightest frames and 0.017 mag 4-6 mag below
+    them (docs/fitting.md). ``model_flux_error`` (``f``) is fitted; the weights then depend on
+    the model, and the ``ln s_i`` terms keep it from growing for free.
+
 ``normalised``
     The comparison of the published Blender workflow, for reference: both light curves are
     min-max scaled, ``n = (max(m) - m) / (max(m) - min(m))`` (1 = brightest), and
@@ -60,9 +70,12 @@ __all__ = [
     "make_likelihood",
     "jitter_of",
     "model_error_of",
+    "flux_error_of",
+    "flux_error_mag",
 ]
 
 OFFSET_MODES = ("marginalised", "none")
+MAG_PER_FLUX_FRACTION = 2.5 / math.log(10.0)  # d(mag) / (dF / F), to first order
 
 
 def _readonly(values, name: str, n: int | None = None) -> np.ndarray:
@@ -121,6 +134,8 @@ class GaussianLikelihood:
         Sample times, seconds, non-decreasing (needed with `correlation_time_s`).
     correlation_time_s : float
         Correlation time of the model error (``model_error_mag``); 0: no such term.
+    flux_error : bool
+        Whether the model's error in flux (``model_flux_error``) is a term of the variance.
     """
 
     mag_obs: np.ndarray
@@ -128,6 +143,7 @@ class GaussianLikelihood:
     offset: str = "marginalised"
     t_s: np.ndarray | None = None
     correlation_time_s: float = 0.0
+    flux_error: bool = False
 
     kind = "gaussian"
 
@@ -157,24 +173,36 @@ class GaussianLikelihood:
     @property
     def parameters(self) -> tuple[str, ...]:
         """The likelihood's own parameters: the jitter, and the model error when correlated."""
-        return ("jitter_mag", "model_error_mag") if self.correlation_time_s > 0 else ("jitter_mag",)
+        names = ("jitter_mag",) + (("model_error_mag",) if self.correlation_time_s > 0 else ())
+        return names + (("model_flux_error",) if self.flux_error else ())
 
-    def _weights(self, jitter_mag: float) -> np.ndarray:
-        return 1.0 / (self.mag_err**2 + jitter_mag**2)
+    def _variance(self, mag_model: np.ndarray, jitter_mag: float, flux_error: float) -> np.ndarray:
+        """Each sample's white variance: observed error, jitter and the model's flux error."""
+        variance = self.mag_err**2 + jitter_mag**2
+        if flux_error > 0 and self.flux_error:
+            variance = variance + (flux_error_mag(mag_model, flux_error)) ** 2
+        return variance
 
-    def offset_mag(self, mag_model: np.ndarray, jitter_mag: float = 0.0) -> float:
+    def _weights(self, mag_model: np.ndarray, jitter_mag: float, flux_error: float = 0.0) -> np.ndarray:
+        return 1.0 / self._variance(mag_model, jitter_mag, flux_error)
+
+    def offset_mag(self, mag_model: np.ndarray, jitter_mag: float = 0.0, flux_error: float = 0.0) -> float:
         """The offset ``c_hat`` that best aligns model to data (0 when the offset is not free)."""
         if self.offset == "none":
             return 0.0
-        w = self._weights(jitter_mag)
+        w = self._weights(mag_model, jitter_mag, flux_error)
         return float(np.sum(w * (self.mag_obs - mag_model)) / np.sum(w))
 
-    def log_likelihood(self, mag_model: np.ndarray, jitter_mag: float = 0.0, model_error_mag: float = 0.0) -> float:
-        """ln L for model magnitudes (n,), jitter and correlated model error (mag); see the
-        module docstring."""
+    def log_likelihood(
+        self, mag_model: np.ndarray, jitter_mag: float = 0.0, model_error_mag: float = 0.0, flux_error: float = 0.0
+    ) -> float:
+        """ln L for model magnitudes (n,), jitter and correlated model error (mag), and the
+        model's flux error (a fraction of its brightest sample); see the module docstring."""
+        if flux_error > 0 and self.flux_error and not np.all(np.isfinite(mag_model)):
+            return -math.inf  # a dark model sample: its flux error would forgive any data
         if model_error_mag > 0 and self.correlation_time_s > 0:
-            return self._correlated_log_likelihood(mag_model, jitter_mag, model_error_mag)
-        w = self._weights(jitter_mag)
+            return self._correlated_log_likelihood(mag_model, jitter_mag, model_error_mag, flux_error)
+        w = self._weights(mag_model, jitter_mag, flux_error)
         r = self.mag_obs - mag_model
         if self.offset == "marginalised":
             W = np.sum(w)
@@ -184,30 +212,38 @@ class GaussianLikelihood:
             extra = 0.0
         return float(-0.5 * np.sum(w * r * r) + 0.5 * np.sum(np.log(w / (2 * math.pi))) + extra)
 
-    def _correlated_log_likelihood(self, mag_model: np.ndarray, jitter_mag: float, model_error_mag: float) -> float:
+    def _correlated_log_likelihood(
+        self, mag_model: np.ndarray, jitter_mag: float, model_error_mag: float, flux_error: float
+    ) -> float:
         r = np.ascontiguousarray(self.mag_obs - mag_model)
         if not np.all(np.isfinite(r)):
             return -math.inf
         rr, r1, one_one, log_det = _filtered_sums(
-            self.t_s, self.mag_err**2 + jitter_mag**2, r, model_error_mag**2, float(self.correlation_time_s)
+            self.t_s,
+            self._variance(mag_model, jitter_mag, flux_error),
+            r,
+            model_error_mag**2,
+            float(self.correlation_time_s),
         )
         value = -0.5 * rr - 0.5 * log_det - 0.5 * r.size * math.log(2 * math.pi)
         if self.offset == "marginalised":
             value += 0.5 * r1 * r1 / one_one + 0.5 * math.log(2 * math.pi / one_one)
         return float(value)
 
-    def compared(self, mag_model: np.ndarray, jitter_mag: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def compared(
+        self, mag_model: np.ndarray, jitter_mag: float = 0.0, flux_error: float = 0.0
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(observed, aligned model, sigma) as compared: the model shifted by the best offset.
 
-        ``sigma`` includes the jitter (not the correlated model error: residual plots and the
-        chi2 show the white part).
+        ``sigma`` includes the jitter and the model's flux error (not the correlated model
+        error: residual plots and the chi2 show the white part).
         """
-        shifted = mag_model + self.offset_mag(mag_model, jitter_mag)
-        return self.mag_obs, shifted, np.sqrt(self.mag_err**2 + jitter_mag**2)
+        shifted = mag_model + self.offset_mag(mag_model, jitter_mag, flux_error)
+        return self.mag_obs, shifted, np.sqrt(self._variance(mag_model, jitter_mag, flux_error))
 
-    def chi2(self, mag_model: np.ndarray, jitter_mag: float = 0.0) -> float:
+    def chi2(self, mag_model: np.ndarray, jitter_mag: float = 0.0, flux_error: float = 0.0) -> float:
         """Sum of squared normalised residuals at the best offset."""
-        obs, model, sigma = self.compared(mag_model, jitter_mag)
+        obs, model, sigma = self.compared(mag_model, jitter_mag, flux_error)
         return float(np.sum(((obs - model) / sigma) ** 2))
 
     @property
@@ -248,19 +284,23 @@ class NormalisedLikelihood:
         object.__setattr__(self, "mag_err", _readonly(self.mag_err, "mag_err", mag.size))
         object.__setattr__(self, "_obs_norm", _normalise(mag))
 
-    def offset_mag(self, mag_model: np.ndarray, jitter_mag: float = 0.0) -> float:
+    def offset_mag(self, mag_model: np.ndarray, jitter_mag: float = 0.0, flux_error: float = 0.0) -> float:
         return 0.0
 
-    def log_likelihood(self, mag_model: np.ndarray, jitter_mag: float = 0.0, model_error_mag: float = 0.0) -> float:
+    def log_likelihood(
+        self, mag_model: np.ndarray, jitter_mag: float = 0.0, model_error_mag: float = 0.0, flux_error: float = 0.0
+    ) -> float:
         """-1/2 sum of squared differences of the normalised curves."""
         d = self._obs_norm - _normalise(mag_model)
         return float(-0.5 * np.sum(d * d))
 
-    def compared(self, mag_model: np.ndarray, jitter_mag: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def compared(
+        self, mag_model: np.ndarray, jitter_mag: float = 0.0, flux_error: float = 0.0
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(normalised observed, normalised model, unit sigma)."""
         return self._obs_norm, _normalise(mag_model), np.ones_like(self._obs_norm)
 
-    def chi2(self, mag_model: np.ndarray, jitter_mag: float = 0.0) -> float:
+    def chi2(self, mag_model: np.ndarray, jitter_mag: float = 0.0, flux_error: float = 0.0) -> float:
         obs, model, _ = self.compared(mag_model)
         return float(np.sum((obs - model) ** 2))
 
@@ -273,17 +313,34 @@ LIKELIHOODS = {"gaussian": GaussianLikelihood, "normalised": NormalisedLikelihoo
 
 
 def make_likelihood(
-    kind: str, mag_obs, mag_err, offset: str = "marginalised", t_s=None, correlation_time_s: float = 0.0
+    kind: str,
+    mag_obs,
+    mag_err,
+    offset: str = "marginalised",
+    t_s=None,
+    correlation_time_s: float = 0.0,
+    flux_error: bool = False,
 ):
     """The likelihood of `kind` (a key of `LIKELIHOODS`) for these observations (sample times
-    `t_s` and a correlated model error for ``gaussian`` when `correlation_time_s` > 0)."""
+    `t_s` and a correlated model error for ``gaussian`` when `correlation_time_s` > 0; the
+    model's flux error as a term of the variance with `flux_error`)."""
     if kind not in LIKELIHOODS:
         raise ValueError(f"unknown likelihood {kind!r}; use one of {', '.join(LIKELIHOODS)}")
-    if correlation_time_s > 0:
+    if correlation_time_s > 0 or flux_error:
         if kind != "gaussian":
-            raise ValueError(f"a correlated model error needs the gaussian likelihood, not {kind!r}")
-        return GaussianLikelihood(mag_obs, mag_err, offset, t_s, correlation_time_s)
+            raise ValueError(f"a model error term needs the gaussian likelihood, not {kind!r}")
+        return GaussianLikelihood(mag_obs, mag_err, offset, t_s, correlation_time_s, flux_error)
     return LIKELIHOODS[kind](mag_obs, mag_err, offset)
+
+
+def flux_error_mag(mag_model: np.ndarray, flux_error: float) -> np.ndarray:
+    """(n,) the magnitude error of a model error of ``flux_error`` times the model's brightest
+    sample's flux: ``2.5 / ln 10 * flux_error * 10^(0.4 (m - min m))`` (the first-order
+    error of a magnitude, so the flux ratio is taken from the finite magnitudes)."""
+    mag_model = np.asarray(mag_model, dtype=float)
+    finite = np.isfinite(mag_model)
+    brightest = np.min(mag_model[finite]) if finite.any() else 0.0
+    return MAG_PER_FLUX_FRACTION * flux_error * 10.0 ** (0.4 * (mag_model - brightest))
 
 
 def jitter_of(values: Mapping[str, float]) -> float:
@@ -294,3 +351,9 @@ def jitter_of(values: Mapping[str, float]) -> float:
 def model_error_of(values: Mapping[str, float]) -> float:
     """The correlated model error from a parameter mapping (0 when the space has none)."""
     return float(values.get("model_error_mag", 0.0))
+
+
+def flux_error_of(values: Mapping[str, float]) -> float:
+    """The model's flux error (fraction of its brightest sample) from a parameter mapping (0
+    when the space has none)."""
+    return float(values.get("model_flux_error", 0.0))

@@ -119,6 +119,13 @@ KNOWN: Mapping[str, Known] = MappingProxyType(
             Uniform(0.0, 0.05),
             "RMS of the forward model's error, correlated over [likelihood] correlation_time_s",
         ),
+        "model_flux_error": Known(
+            "f_model",
+            "",
+            None,
+            Uniform(0.0, 0.02),
+            "the forward model's error in flux, a fraction of its brightest sample ([likelihood] flux_error)",
+        ),
         "spin_period_rate_s_per_day": Known(
             "dP/dt",
             "s/day",

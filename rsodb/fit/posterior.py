@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from rsodb.fit.likelihood import jitter_of, model_error_of
+from rsodb.fit.likelihood import flux_error_of, jitter_of, model_error_of
 from rsodb.fit.parameters import ParameterSpace
 
 __all__ = ["Posterior"]
@@ -64,7 +64,9 @@ class Posterior:
 
     def log_likelihood(self, theta: np.ndarray) -> float:
         values = self.space.values(theta)
-        return self.likelihood.log_likelihood(self.model.magnitudes(values), jitter_of(values), model_error_of(values))
+        return self.likelihood.log_likelihood(
+            self.model.magnitudes(values), jitter_of(values), model_error_of(values), flux_error_of(values)
+        )
 
     def __call__(self, theta: np.ndarray) -> float:
         log_prior = self.space.log_prior(theta)

@@ -50,6 +50,7 @@ from typing import Any
 import numpy as np
 
 from rsodb.fit.curves import ModelCurve, PassCurve
+from rsodb.fit.likelihood import flux_error_of
 from rsodb.fit.parameters import ParameterSpace, describe
 from rsodb.fit.sampler import autocorr_time
 from rsodb.storage import attr_text, to_json
@@ -454,7 +455,7 @@ class FitResult:
         likelihood = posterior.likelihood
         jitter = float(values.get("jitter_mag", 0.0))
         model_mag = posterior.model.magnitudes(values)
-        offset = likelihood.offset_mag(model_mag, jitter)
+        offset = likelihood.offset_mag(model_mag, jitter, flux_error_of(values))
         if pass_curve is None:
             pass_curve = PassCurve(
                 time_utc,

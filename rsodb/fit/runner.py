@@ -188,6 +188,7 @@ class FitProblem:
                 config.likelihood.offset,
                 geometry.t_s,
                 config.likelihood.correlation_time_s,
+                config.likelihood.flux_error,
             )
             return Posterior(space, model, likelihood)
 
