@@ -172,7 +172,8 @@ class GaussianLikelihood:
 
     @property
     def parameters(self) -> tuple[str, ...]:
-        """The likelihood's own parameters: the jitter, and the model error when correlated."""
+        """The likelihood's own parameters: the jitter, the model error when correlated, the
+        model's flux error when asked."""
         names = ("jitter_mag",) + (("model_error_mag",) if self.correlation_time_s > 0 else ())
         return names + (("model_flux_error",) if self.flux_error else ())
 
