@@ -432,7 +432,6 @@ def scene_rows(
     tumble frames (Cycles on every ``tumble_stride``-th) and the hard frames. Without Cycles
     the reference is the direct renderer at its finest pixel size and only the fast path is
     compared with it."""
-
     from raycast.cycles.comparison import hard_frames, mag_difference, tumble_frames
     from raycast.cycles.runner import CyclesSettings, render_cycles
 
