@@ -425,6 +425,7 @@ def scene_rows(
     reference_cycles=REFERENCE_CYCLES,
     cycles_ladder=CYCLES_LADDER,
     cache_grids=(32,),
+    normal_step_deg=None,
 ):
     """Result rows of one comparison scene: Cycles at its reference and ladder settings, the
     direct renderer at several pixel sizes, the fast path at each of ``cache_grids`` (its
@@ -517,7 +518,7 @@ def scene_rows(
                 setup_s=setup_cpu,
             )
     for grid in cache_grids if with_cache else ():
-        cache, build_wall, build_cpu, peak_mb = traced_build(scene, grid)
+        cache, build_wall, build_cpu, peak_mb = traced_build(scene, grid, normal_step_deg)
         for frames, fs in frame_sets.items():
             # Timed on all 150 tumble frames (a whole light curve); compared on Cycles' frames.
             timing_frames = tumble if frames == "tumble" else fs
@@ -525,7 +526,7 @@ def scene_rows(
             values = cache.intensity(fs.sun_body, fs.obs_body)
             row(
                 "cached",
-                f"grid {grid}",
+                f"grid {grid}" + (f", normal step {normal_step_deg:g} deg" if normal_step_deg else ""),
                 frames,
                 mag_difference(values, references[frames]),
                 cpu * 150 / len(timing_frames),
@@ -560,7 +561,7 @@ NUMBA_MODULES = (
 )
 
 
-def traced_build(scene, grid):
+def traced_build(scene, grid, normal_step_deg=None):
     """(cache, build wall s, build CPU s, traced peak MB) of the fast path's build. A build that
     compiled (or loaded from numba's cache) one of the renderer's loops is built again: numba's
     compiler allocates through Python too, so on a fresh installation the first build of a scene
@@ -571,7 +572,9 @@ def traced_build(scene, grid):
     while True:
         loops = compiled_loops()
         tracemalloc.start()
-        cache, build_wall, build_cpu = timed(lambda: SceneCache.build(scene, grid_size=grid))
+        cache, build_wall, build_cpu = timed(
+            lambda: SceneCache.build(scene, grid_size=grid, normal_step_deg=normal_step_deg)
+        )
         peak_mb = tracemalloc.get_traced_memory()[1] / 1e6
         tracemalloc.stop()
         if compiled_loops() == loops:
@@ -619,7 +622,9 @@ def scenes_chart(rows, path, reference_cycles=REFERENCE_CYCLES):
     print(f"chart written to {path}")
 
 
-def scenes_section(rows, load, stride, per_kind, with_cycles=True, reference_cycles=REFERENCE_CYCLES):
+def scenes_section(
+    rows, load, stride, per_kind, with_cycles=True, reference_cycles=REFERENCE_CYCLES, normal_step_deg=None
+):
     reference = (
         f"Reference: Cycles {reference_cycles[0]}^2 px x {reference_cycles[1]} samples, object terminator "
         f"offsets 0, direct light, box filter; its row gives its own standard error (two passes)."
@@ -630,6 +635,8 @@ def scenes_section(rows, load, stride, per_kind, with_cycles=True, reference_cyc
     title = "Renderers against Cycles on the comparison scenes" if with_cycles else "Fast path on the comparison scenes"
     if with_cycles and reference_cycles != REFERENCE_CYCLES:
         title = f"Renderers against a {reference_cycles[1]}-sample Cycles reference on the comparison scenes"
+    if normal_step_deg:
+        title += f", the fast path's shading normals in steps of {normal_step_deg:g} deg"
     lines = [
         f"## {title} ({today()}, bench/render.py --scenes)\n",
         f"The scenes and frame sets of raycast.cycles.comparison: tumble frames (one 40 s spin, phase "
@@ -720,6 +727,7 @@ def run_scenes(args, argv):
             reference_cycles=args.cycles_reference,
             cycles_ladder=args.cycles_ladder,
             cache_grids=args.cache_grids,
+            normal_step_deg=args.cache_normal_step_deg,
         )
         if partial:
             partial.write_text(json.dumps(rows))
@@ -733,11 +741,21 @@ def run_scenes(args, argv):
             else SCENES_CHART.with_name(f"{SCENES_CHART.stem}_ref{args.cycles_reference[1]}{SCENES_CHART.suffix}")
         )
         scenes_chart(rows, chart, args.cycles_reference)
-    section = scenes_section(rows, load, args.tumble_stride, args.per_kind, not args.no_cycles, args.cycles_reference)
+    section = scenes_section(
+        rows,
+        load,
+        args.tumble_stride,
+        args.per_kind,
+        not args.no_cycles,
+        args.cycles_reference,
+        args.cache_normal_step_deg,
+    )
     print(section)
     name = "render_scenes" if not args.no_cycles else "render_scenes_fast_path"
     # A run against another reference is its own benchmark: it does not replace the default's table.
     name += "" if default_reference or args.no_cycles else f"_reference_{args.cycles_reference[1]}spp"
+    # So is a run with the fast path's shading normals set coarser or finer than its own rule.
+    name += f"_normal_step_{args.cache_normal_step_deg:g}deg" if args.cache_normal_step_deg else ""
     record(name, command("render.py", argv), scenes_figures(rows), section, data=rows)
     return 0
 
@@ -777,6 +795,13 @@ def main(argv=None):
         type=lambda text: tuple(int(part) for part in text.split(",")),
         default=(32,),
         help="with --scenes: the fast path's cube-map sizes, joined by commas (default 32)",
+    )
+    parser.add_argument(
+        "--cache-normal-step-deg",
+        type=float,
+        default=None,
+        help="with --scenes: the fast path's largest shading-normal turn within a piece, every material "
+        "(default: each material's own rule, a fraction of its lobe)",
     )
     parser.add_argument(
         "--cycles-reference",
