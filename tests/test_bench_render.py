@@ -28,3 +28,12 @@ def test_traced_build_measures_a_build_that_compiled_nothing():
     # The peak holds the tables, which the cache keeps, and the build's temporaries above them.
     assert peak_mb > cache.nbytes / 1e6
     assert wall > 0 and cpu > 0
+
+
+def test_the_normal_step_option_reaches_the_build():
+    from bench.render import traced_build
+    from raycast.cycles.comparison import comparison_scenes
+
+    plate = comparison_scenes(ROOT.parent / "shared" / "data" / "models", ("plate",))["plate"].scene
+    assert traced_build(plate, 4, 6.0)[0].normal_step_deg == pytest.approx(6.0, abs=1e-9)
+    assert traced_build(plate, 4)[0].normal_step_deg != pytest.approx(6.0, abs=0.1)  # the material's own rule
