@@ -538,6 +538,15 @@ def scene_rows(
     return rows
 
 
+NUMBA_MODULES = (
+    "raycast.renderer.brdf",
+    "raycast.renderer.rays",
+    "raycast.renderer._cache_kernels",
+    "raycast.renderer._direct_kernels",
+    "raycast.renderer._shading_kernels",
+)
+
+
 def compiled_loops() -> int:
     """How many compiled versions of the renderer's numba loops this process holds (compiled
     here or loaded from numba's cache)."""
@@ -550,15 +559,6 @@ def compiled_loops() -> int:
         module = importlib.import_module(name)
         count += sum(len(v.overloads) for v in vars(module).values() if isinstance(v, CPUDispatcher))
     return count
-
-
-NUMBA_MODULES = (
-    "raycast.renderer.brdf",
-    "raycast.renderer.rays",
-    "raycast.renderer._cache_kernels",
-    "raycast.renderer._direct_kernels",
-    "raycast.renderer._shading_kernels",
-)
 
 
 def traced_build(scene, grid, normal_step_deg=None):

@@ -50,7 +50,7 @@ from typing import Any
 import numpy as np
 
 from rsodb.fit.curves import ModelCurve, PassCurve
-from rsodb.fit.likelihood import flux_error_of
+from rsodb.fit.likelihood import flux_error_of, jitter_of
 from rsodb.fit.parameters import ParameterSpace, describe
 from rsodb.fit.sampler import autocorr_time
 from rsodb.storage import attr_text, to_json
@@ -453,7 +453,7 @@ class FitResult:
         best = space.wrap(run.chain[best_index])
         values = space.values(best)
         likelihood = posterior.likelihood
-        jitter = float(values.get("jitter_mag", 0.0))
+        jitter = jitter_of(values)
         model_mag = posterior.model.magnitudes(values)
         offset = likelihood.offset_mag(model_mag, jitter, flux_error_of(values))
         if pass_curve is None:
