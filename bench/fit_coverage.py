@@ -141,6 +141,8 @@ def cycles_config(axis: str, args=None) -> dict:
         config["model"]["accuracy_mag"] = args.cache_accuracy_mag
     if args.cache_grid_size:
         config["model"]["grid_size"] = args.cache_grid_size
+    if args.cache_element_size_m:
+        config["model"]["element_size_m"] = args.cache_element_size_m
     if args.correlation_time_s:  # (only when asked: the default likelihood is as it was)
         config["likelihood"] = {"correlation_time_s": args.correlation_time_s}
     if args.flux_error:
@@ -412,6 +414,7 @@ def forward_model_at_truth(directory: Path, records: list[dict], argv, args) -> 
         )
         # The settings of the cache this fit really built (the same for every pass).
         cache_accuracy, cache_grid = problem.config.model.accuracy_mag, problem.posterior.model.brightness.grid_size
+        cache_element_mm = 1000.0 * problem.posterior.model.brightness.element_size_m
         values = dict(problem.posterior.space.fixed, **rec["truth"])
         cached = problem.posterior.model.magnitudes(values) - data["clean_mag"]
         cached = cached[np.isfinite(cached)] - np.median(cached[np.isfinite(cached)])
@@ -434,12 +437,14 @@ def forward_model_at_truth(directory: Path, records: list[dict], argv, args) -> 
     axes = sorted({rec["axis"] for rec, *_ in rows})
     by_axis = {axis: float(np.median([row[1] for row in rows if row[0]["axis"] == axis])) for axis in axes}
     fit_by_axis = {axis: float(np.median([row[5] for row in rows if row[0]["axis"] == axis])) for axis in axes}
+    variant = f", elements up to {cache_element_mm:.0f} mm" if args.cache_element_size_m else ""
     section = f"""
-## The fit's forward model against Cycles at the true state ({today()}, bench/fit_coverage.py --cycles --at-truth)
+## The fit's forward model against Cycles at the true state{variant} ({today()}, bench/fit_coverage.py --cycles --at-truth)
 
 The project's direct renderer of the published workflow's COSMOS 2502 mesh (accuracy 0.005 mag,
 0.01 where its pixel budget cannot reach 0.005), and the fit's own model of it (the cached renderer
-as a `--cycles` fit builds it: tables to {cache_accuracy} mag, cube map of {cache_grid}),
+as a `--cycles` fit builds it: tables to {cache_accuracy} mag, cube map of {cache_grid}, elements up to
+{cache_element_mm:.0f} mm),
 against the noiseless magnitudes Blender Cycles rendered of the same mesh along {len(rows)} passes of
 `--cycles` (120 s, 600 frames each), at the true spin state, after the median offset: the floor
 under any fit's residuals, before noise (0.02 mag) and before fitting.
@@ -465,7 +470,13 @@ Reproduce: `{command("fit_coverage.py", argv)}`.
         )
         for axis, value in fit_by_axis.items()
     ]
-    record("fit_forward_vs_cycles", command("fit_coverage.py", argv), figures, section)
+    # A cache of other elements is its own benchmark: the default's figures stay beside it.
+    name = (
+        f"fit_forward_vs_cycles_elements_{cache_element_mm:.0f}mm"
+        if args.cache_element_size_m
+        else "fit_forward_vs_cycles"
+    )
+    record(name, command("fit_coverage.py", argv), figures, section)
     return 0
 
 
@@ -518,6 +529,152 @@ def append_journal(journal: Path, record: dict, config: dict, recovery) -> None:
         handle.write(json.dumps(entry, default=float) + "\n")
 
 
+class _DirectBrightness:
+    """The direct renderer behind a fit's forward model (``intensity(sun, obs)``). Its first call
+    chooses the pixels: those of 0.005 mag, else of 0.01, else the mesh radius / 150 (the render
+    benchmark's reference) where a glint or shadow edge keeps even 0.01 out of reach; later calls
+    keep them, so two states are compared with one renderer. ``settings`` says which it took."""
+
+    def __init__(self, scene):
+        self.scene = scene
+        self.accuracy_mag, self.pixel_size_m = 0.01, None
+        self.settings = ""
+
+    def intensity(self, sun, obs, **parameters):
+        from raycast.renderer.direct import AccuracyOutOfReach
+        from raycast.renderer.methods import METHODS
+
+        if self.pixel_size_m is None:
+            self.pixel_size_m = self.scene.posed().radius_m / 150.0
+            self.settings = f"{1000 * self.pixel_size_m:.1f} mm pixels, radius / 150"
+            for accuracy in (0.005, 0.01):
+                try:
+                    values, chosen = METHODS["direct"](self.scene, sun, obs, accuracy, None, None, False)
+                except AccuracyOutOfReach:
+                    continue
+                self.accuracy_mag, self.pixel_size_m = accuracy, chosen["pixel_size_m"]
+                self.settings = f"{accuracy} mag: {1000 * self.pixel_size_m:.1f} mm pixels"
+                return values
+        return METHODS["direct"](self.scene, sun, obs, self.accuracy_mag, None, self.pixel_size_m, False)[0]
+
+
+def _truth_near(recovery, names) -> dict:
+    """The truth as the fit's values: its look-alike nearest the median where an angle is scored
+    modulo a look-alike turn, and the median's value of what was not injected (the jitter)."""
+    values = {}
+    for name in names:
+        if name not in recovery.truth:
+            values[name] = float(recovery.median[name])
+            continue
+        truth = float(recovery.truth[name])
+        turn = (recovery.look_alike_turns or {}).get(name)
+        if turn:
+            truth += turn * round((float(recovery.median[name]) - truth) / turn)
+        values[name] = truth
+    return values
+
+
+def diagnose_fits(directory: Path, records: list[dict], argv, args) -> int:
+    """Whose miss is it, the forward model's or the sampler's? For every pass fitted with these
+    settings (the journal), ln L at the fit's posterior median minus ln L at the truth, under the
+    fit's cached model and under the direct renderer of the same mesh. Where the model holds,
+    2 (ln L(best) - ln L(truth)) is chi-square with one degree per free parameter; a median far
+    above the truth under the cached model but not under the direct one means the cached
+    model's own error moved the fit."""
+    import dataclasses
+
+    from scipy.stats import chi2
+
+    from raycast.renderer.cache import SceneCache
+    from rsodb.fit.config import FitConfig
+    from rsodb.fit.runner import FitProblem
+    from rsodb.fit.shape_store import ShapeStore
+
+    configs = [cycles_config(record["axis"], args) for record in records]
+    done = load_journal(directory / "recoveries.jsonl", records, configs)
+    if not done:
+        print(
+            f"no pass is fitted with these settings yet ({directory / 'recoveries.jsonl'}); give the "
+            "settings of a coverage run that finished",
+            file=sys.stderr,
+        )
+        return 1
+    rows = []
+    for rendered, config in zip(records, configs):
+        recovery = done.get(int(rendered["index"]))
+        if recovery is None:
+            continue
+        problem = FitProblem.build(
+            load_cycles_pass(directory, rendered),
+            FitConfig.from_dict(config),
+            store=ShapeStore(str(directory / "shapes")),
+        )
+        posterior = problem.posterior
+        if not isinstance(posterior.model.brightness, SceneCache):
+            raise SystemExit(
+                f"--diagnose needs the fit's cached renderer, not {type(posterior.model.brightness).__name__}"
+            )
+        names = posterior.space.names
+        median = np.array([float(recovery.median[n]) for n in names])
+        truth_values = _truth_near(recovery, names)
+        truth = np.array([truth_values[n] for n in names])
+        direct_brightness = _DirectBrightness(posterior.model.brightness.scene)
+        direct = dataclasses.replace(
+            posterior, model=dataclasses.replace(posterior.model, brightness=direct_brightness)
+        )
+        started = time.process_time()
+        # The truth first: the direct renderer chooses its pixels there.
+        gains = [-p.log_likelihood(truth) + p.log_likelihood(median) for p in (posterior, direct)]
+        misses = [n for n, inside in recovery.covered95.items() if not inside]
+        rows.append((rendered, gains, direct_brightness.settings, misses, time.process_time() - started))
+        print(
+            f"pass {rendered['index']} ({rendered['axis']}): ln L(median) - ln L(truth): cached model {gains[0]:+.1f}, "
+            f"direct renderer ({direct_brightness.settings}) {gains[1]:+.1f}; outside 95%: {', '.join(misses) or '-'}",
+            flush=True,
+        )
+    free = len(names)
+    limit = 0.5 * float(chi2.ppf(0.95, free))
+    beyond = [sum(row[1][k] > limit for row in rows) for k in (0, 1)]
+    summary = (
+        f"ln L(median) - ln L(truth) beyond {limit:.1f} (half the 95% point of chi-square with {free} degrees): "
+        f"cached model {beyond[0]} of {len(rows)} passes, direct renderer {beyond[1]} of {len(rows)}"
+    )
+    print(summary)
+    if args.no_record:
+        return 0
+    table = "\n".join(
+        f"| {rec['index']} | {rec['axis']} | {gains[0]:+.1f} | {gains[1]:+.1f} | {settings} | {', '.join(misses) or '-'} |"
+        for rec, gains, settings, misses, _ in rows
+    )
+    section = f"""
+## Whose miss: the cached model's or the sampler's? ({today()}, bench/fit_coverage.py --cycles --diagnose)
+
+For each Cycles pass of the coverage run with these settings (its journal), the log-likelihood
+of the fit's posterior median minus that of the truth, under the fit's own forward model (the
+cached renderer) and under the project's direct renderer of the same mesh (the same likelihood,
+jitter at the fit's median, the truth's look-alike phase nearest the median where the phase is
+scored modulo a look-alike turn). Where a model holds, 2 (ln L(best) - ln L(truth)) is
+chi-square with {free} degrees of freedom, so values above {limit:.1f} are rare (5%); the median is
+not the best point, so it may also fall below the truth. A pass far above under the cached model
+and not under the direct renderer was moved by the cached model's own error, not by the sampler.
+
+| pass | spin axis | cached model | direct renderer | direct renderer's setting | outside the fit's 95% |
+|---|---|---|---|---|---|
+{table}
+
+{summary}.
+Reproduce: `{command("fit_coverage.py", argv)}`.
+"""
+    figures = [
+        figure(
+            "passes where the cached model prefers the fit's median by > chi2 95%", f"{beyond[0]} of {len(rows)}", ""
+        ),
+        figure("the same under the direct renderer", f"{beyond[1]} of {len(rows)}", ""),
+    ]
+    record("fit_coverage_diagnosis", command("fit_coverage.py", argv), figures, section)
+    return 0
+
+
 def run_cycles(args, argv) -> int:
     """The Cycles mode: render (or reuse) the passes, fit each, report coverage and bias."""
     import json
@@ -531,6 +688,8 @@ def run_cycles(args, argv) -> int:
         return 0
     if args.at_truth:
         return forward_model_at_truth(directory, records, argv, args)
+    if args.diagnose:
+        return diagnose_fits(directory, records, argv, args)
     started = time.perf_counter()
     configs = [cycles_config(record["axis"], args) for record in records]
     # Each finished fit is appended to a journal at once, so a run that is stopped keeps its fits and
@@ -753,6 +912,12 @@ def command_line() -> argparse.ArgumentParser:
         action="store_true",
         help="compare the project's renderer with Cycles at the true states, fit nothing",
     )
+    cycles.add_argument(
+        "--diagnose",
+        action="store_true",
+        help="for the passes fitted with these settings: ln L at the fit's median minus at the truth, "
+        "under the cached model and the direct renderer (is a miss the model's or the sampler's?)",
+    )
     cycles.add_argument("--cycles-resolution", type=int, default=128, help="Cycles px across the footprint")
     cycles.add_argument("--cycles-samples", type=int, default=16, help="Cycles samples per pixel")
     cycles.add_argument(
@@ -789,6 +954,12 @@ def command_line() -> argparse.ArgumentParser:
         type=int,
         default=0,
         help="the fit's cached renderer: cube-map size (default 0: chosen from the fit's planned work)",
+    )
+    cycles.add_argument(
+        "--cache-element-size-m",
+        type=float,
+        default=0.0,
+        help="the fit's cached renderer: largest element (default 0: its own, the mesh radius / 30)",
     )
     return parser
 

@@ -123,6 +123,11 @@ def test_defaults_and_overrides():
             {"model": {"grid_size": 2}},
             r"\[model\] grid_size=2 must be 0 \(chosen from the fit's planned work\) or a whole number 4..256",
         ),
+        (
+            {"model": {"element_size_m": -0.1}},
+            r"\[model\] element_size_m=-0.1 must be 0 \(the renderer's default\) or a size in metres",
+        ),
+        ({"model": {"element_size_m": "fine"}}, r"\[model\] element_size_m='fine' must be 0"),
         ({"sampler": {"n_walker": 4}}, r"\[sampler\] has unknown keys \['n_walker'\]"),
         ({"parameters": {"spin_rate": 1.0}}, r"\[parameters\] unknown parameter 'spin_rate'; known parameters"),
         (

@@ -150,6 +150,8 @@ def test_cycles_fit_configuration_takes_any_callers_settings():
     assert (finer.model.grid_size, finer.model.accuracy_mag) == (96, 0.01)
     sharper = FitConfig.from_dict(cycles_config("x", command_line().parse_args(["--cache-accuracy-mag", "0.005"])))
     assert (sharper.model.grid_size, sharper.model.accuracy_mag) == (0, 0.005)
+    smaller = FitConfig.from_dict(cycles_config("x", command_line().parse_args(["--cache-element-size-m", "0.146"])))
+    assert (smaller.model.element_size_m, finer.model.element_size_m) == (0.146, 0.0)
     # So do the likelihood's model-error terms.
     plain = FitConfig.from_dict(cycles_config("x", command_line().parse_args([])))
     assert not plain.likelihood.flux_error and plain.likelihood.correlation_time_s == 0

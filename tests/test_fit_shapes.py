@@ -92,6 +92,27 @@ def test_the_cache_grid_follows_the_length_of_the_fit(tmp_path, template):
     assert len(list((tmp_path / "shapes").glob("*.pkl"))) == 3
 
 
+def test_the_element_size_reaches_the_cache_and_its_key(tmp_path, template):
+    # [model] element_size_m sets the cache's largest element (a finer cut: more elements) and is
+    # part of the stored cache's key; 0 keeps the renderer's default and the default key.
+    obj, materials = write_box(tmp_path)
+    # A plate above the box shades its top, so the top is cut into elements (a convex body's
+    # sides are all exposed and never cut).
+    plate = ["o plate", "usemtl paint", "v -0.5 -0.5 1.5", "v 0.5 -0.5 1.5", "v 0.5 0.5 1.5", "v -0.5 0.5 1.5"]
+    obj.write_text(obj.read_text() + "\n".join(plate + ["f 9 10 11 12"]) + "\n")
+    store = ShapeStore(tmp_path / "shapes")
+
+    def cache_of(model):
+        record = {"model": {"mesh": str(obj), "materials": str(materials), "n_sub": 1, **model}, "parameters": PRIOR}
+        return FitProblem.build(template, FitConfig.from_dict(record), store=store).posterior.model.brightness
+
+    default, same, finer = cache_of({}), cache_of({"element_size_m": 0.0}), cache_of({"element_size_m": 0.02})
+    assert same is default
+    assert finer.element_size_m == 0.02 and default.element_size_m > 0.04
+    assert finer.n_elements > default.n_elements
+    assert len(list((tmp_path / "shapes").glob("*.pkl"))) == 2
+
+
 def test_the_stored_cache_is_reused_and_keyed_by_content(tmp_path, template, monkeypatch):
     obj, materials = write_box(tmp_path)
     record = {"model": {"mesh": str(obj), "materials": str(materials), "n_sub": 1}, "parameters": PRIOR}

@@ -44,7 +44,10 @@ class ModelConfig:
     ``mesh`` (OBJ, PLY, glTF) with ``materials`` (its materials JSON) and ``articulations``
     (tables of ``parameter``, ``part``, ``axis``, ``point_m``, ``rest_deg``) fits any scene;
     relative paths in a TOML file are relative to that file. ``grid_size`` is the shape cache's
-    direction grid (0: chosen from the fit's planned work, `rsodb.fit.shapes.cache_grid_size`).
+    direction grid (0: chosen from the fit's planned work, `rsodb.fit.shapes.cache_grid_size`);
+    ``element_size_m`` its largest surface element on shadowable sides (0: the renderer's
+    default, the mesh radius / 30; the cached model's error against the direct renderer falls
+    about in proportion, docs/fitting.md).
     """
 
     shape: str = "auto"
@@ -58,6 +61,7 @@ class ModelConfig:
     accuracy_mag: float = 0.01
     n_sub: int = 0
     grid_size: int = 0
+    element_size_m: float = 0.0
 
     def __post_init__(self):
         if self.shape != "auto" and self.shape not in SHAPES:
@@ -94,6 +98,14 @@ class ModelConfig:
             raise ValueError(
                 f"[model] grid_size={self.grid_size!r} must be 0 (chosen from the fit's planned work) "
                 "or a whole number 4..256"
+            )
+        if not (
+            isinstance(self.element_size_m, (int, float))
+            and math.isfinite(self.element_size_m)
+            and self.element_size_m >= 0
+        ):
+            raise ValueError(
+                f"[model] element_size_m={self.element_size_m!r} must be 0 (the renderer's default) or a size in metres"
             )
         if not (isinstance(self.accuracy_mag, (int, float)) and 0 < self.accuracy_mag < 1):
             raise ValueError(

@@ -159,6 +159,7 @@ class FitProblem:
             accuracy_mag=config.model.accuracy_mag,
             grid_size=config.model.grid_size
             or cache_grid_size(planned_frame_evaluations(config, observed, selection, bounds)),
+            element_size_m=config.model.element_size_m,
             progress=progress,
             store=store,
             name=shape_name,

@@ -389,9 +389,17 @@ def _sharpest_surfaces(shape: Shape, free_bounds: Mapping, fixed: Mapping) -> di
 
 
 def _build_cache(
-    scene, grid: tuple, smoothest_roughness: float | None, accuracy_mag: float, grid_size: int, progress: bool
+    scene,
+    grid: tuple,
+    smoothest_roughness: float | None,
+    accuracy_mag: float,
+    grid_size: int,
+    progress: bool,
+    element_size_m: float = 0.0,
 ):
     options = {"grid_size": grid_size}
+    if element_size_m:
+        options["element_size_m"] = element_size_m
     if smoothest_roughness is not None:
         smooth = scene.with_brdfs(
             **{
@@ -420,6 +428,7 @@ def brightness_for(
     renderer: str = "cached",
     accuracy_mag: float = 0.01,
     grid_size: int = CACHE_GRID_SIZE,
+    element_size_m: float = 0.0,
     pixel_size_m: float = 0.05,
     progress: bool = False,
     store: ShapeStore | None = None,
@@ -442,6 +451,8 @@ def brightness_for(
         Accuracy asked of the cache.
     grid_size : int
         The cache's cube-map resolution (:func:`cache_grid_size`).
+    element_size_m : float
+        The cache's largest element on shadowable sides (0: its default, the mesh radius / 30).
     pixel_size_m : float
         Ray spacing of the direct renderer.
     progress : bool
@@ -497,7 +508,18 @@ def brightness_for(
         if grid_size != CACHE_GRID_SIZE:
             # Only a finer grid enters the key, so caches stored before it was a setting stay found.
             settings["grid_size"] = int(grid_size)
-        build = functools.partial(_build_cache, scene, grid, smoothest, float(accuracy_mag), int(grid_size), progress)
+        if element_size_m:
+            settings["element_size_m"] = float(element_size_m)  # the same: only when given
+        build = functools.partial(
+            _build_cache,
+            scene,
+            grid,
+            smoothest,
+            float(accuracy_mag),
+            int(grid_size),
+            progress,
+            float(element_size_m),
+        )
         base = (store or ShapeStore()).get(scene, settings, build)
     elif renderer == "direct":
         base = DirectRenderer(scene, pixel_size_m, 1)
