@@ -629,7 +629,8 @@ def diagnose_fits(directory: Path, records: list[dict], argv, args) -> int:
         rows.append((rendered, gains, direct_brightness.settings, misses, time.process_time() - started))
         print(
             f"pass {rendered['index']} ({rendered['axis']}): ln L(median) - ln L(truth): cached model {gains[0]:+.1f}, "
-            f"direct renderer ({direct_brightness.settings}) {gains[1]:+.1f}; outside 95%: {', '.join(misses) or '-'}",
+            f"direct renderer ({direct_brightness.settings}; {rows[-1][4]:.0f} s of CPU for the four light curves) "
+            f"{gains[1]:+.1f}; outside 95%: {', '.join(misses) or '-'}",
             flush=True,
         )
     free = len(names)
@@ -643,8 +644,9 @@ def diagnose_fits(directory: Path, records: list[dict], argv, args) -> int:
     if args.no_record:
         return 0
     table = "\n".join(
-        f"| {rec['index']} | {rec['axis']} | {gains[0]:+.1f} | {gains[1]:+.1f} | {settings} | {', '.join(misses) or '-'} |"
-        for rec, gains, settings, misses, _ in rows
+        f"| {rec['index']} | {rec['axis']} | {gains[0]:+.1f} | {gains[1]:+.1f} | {settings} | {cpu:.0f} | "
+        f"{', '.join(misses) or '-'} |"
+        for rec, gains, settings, misses, cpu in rows
     )
     section = f"""
 ## Whose miss: the cached model's or the sampler's? ({today()}, bench/fit_coverage.py --cycles --diagnose)
@@ -658,8 +660,8 @@ chi-square with {free} degrees of freedom, so values above {limit:.1f} are rare 
 not the best point, so it may also fall below the truth. A pass far above under the cached model
 and not under the direct renderer was moved by the cached model's own error, not by the sampler.
 
-| pass | spin axis | cached model | direct renderer | direct renderer's setting | outside the fit's 95% |
-|---|---|---|---|---|---|
+| pass | spin axis | cached model | direct renderer | direct renderer's setting | CPU s (4 light curves) | outside the fit's 95% |
+|---|---|---|---|---|---|---|
 {table}
 
 {summary}.
