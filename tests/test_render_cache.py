@@ -195,6 +195,42 @@ def test_a_window_narrower_than_the_grid_is_seen_through(monkeypatch):
     assert rms_mag(blind.intensity(sun, obs), reference) > 0.5
 
 
+def test_the_gap_search_reaches_as_high_above_the_horizon_on_a_fine_grid(monkeypatch):
+    # A window like the test above's, 2 x 3 cm, seen 3.6-5 deg above the floor on a 64-node grid
+    # (1.4 deg spacing; the window spans 0.3-1 deg): two grid spacings are 2.8 deg, so the gap
+    # search must reach higher than that (_GAP_BAND_MIN_RAD, 5.6 deg) to find the window's gap
+    # nodes. The slits' search is off, so the horizon probes alone decide; without the floor on
+    # the band the floor stays dark where it sees out only through the window.
+    import raycast.renderer.cache
+
+    monkeypatch.setattr(raycast.renderer.cache, "_FACTOR_MIN_ELEMENTS", 10**9)
+    monkeypatch.setattr(raycast.renderer.cache, "_slit_gaps", lambda *args: 0)
+
+    def slab(name, y0, y1, z0, z1):
+        return Part.box(name, (0.02, y1 - y0, z1 - z0), "black", center_m=(2.6, (y0 + y1) / 2, (z0 + z1) / 2))
+
+    wall = [
+        slab("left", -0.4, 0.0, 0.0, 0.4),
+        slab("right", 0.02, 0.46, 0.0, 0.4),
+        slab("below", 0.0, 0.02, 0.0, 0.13),
+        slab("above", 0.0, 0.02, 0.16, 0.4),
+    ]
+    scene = Scene.from_parts(
+        [Part.plate("floor", 3.0, 0.3, "paint"), *wall], {"paint": Lambertian(0.5), "black": Lambertian(0.001)}
+    )
+    elevation, azimuth = (a.ravel() for a in np.meshgrid(np.radians([3.6, 4.3, 5.0]), np.radians([-0.9, 0.4, 1.1])))
+    obs = np.column_stack([np.cos(elevation) * np.cos(azimuth), np.cos(elevation) * np.sin(azimuth), np.sin(elevation)])
+    sun = np.tile(unit(np.array([-0.3, 0.1, 0.95])), (len(obs), 1))
+    reference = DirectRenderer(scene, 0.002).intensity(sun, obs)
+    cache = SceneCache.build(scene, element_size_m=0.03, grid_size=64)
+    # (3 cm elements seeing out through a 2 cm window: within 0.1 mag of the direct renderer.)
+    assert rms_mag(cache.intensity(sun, obs), reference) < 0.1
+    monkeypatch.setattr(raycast.renderer.cache, "_GAP_BAND_MIN_RAD", 0.0)  # two grid spacings only
+    narrow = SceneCache.build(scene, element_size_m=0.03, grid_size=64)
+    assert len(narrow.poses[0].gap_word) < len(cache.poses[0].gap_word)
+    assert rms_mag(narrow.intensity(sun, obs), reference) > 0.5
+
+
 def test_light_through_slits_between_slats_reaches_the_surface_below(monkeypatch):
     # A floor under a panel of six slats 3 cm apart (each its own part, as the paper's COSMOS
     # 2502 panels are built), the Sun near the zenith, the observer 20 deg up beside the panel:
