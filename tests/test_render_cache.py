@@ -158,6 +158,30 @@ def test_elements_partly_covered_by_a_mount_are_quartered(monkeypatch):
     assert rms_mag(whole.intensity(sun, obs), reference) > 0.01
 
 
+def window_in_a_wall(width_m, bottom_m, top_m, elevations_deg):
+    """A 3 x 0.3 m floor and a black wall 2.6 m along it with a window ``width_m`` wide between
+    heights ``bottom_m`` and ``top_m``; observers at ``elevations_deg`` above the floor (three
+    azimuths each), a Sun that lights the floor and not the wall's far side; the direct
+    renderer's intensities at 2 mm pixels. Returns (scene, sun, obs, reference)."""
+
+    def slab(name, y0, y1, z0, z1):
+        return Part.box(name, (0.02, y1 - y0, z1 - z0), "black", center_m=(2.6, (y0 + y1) / 2, (z0 + z1) / 2))
+
+    wall = [
+        slab("left", -0.4, 0.0, 0.0, 0.4),
+        slab("right", width_m, 0.46, 0.0, 0.4),
+        slab("below", 0.0, width_m, 0.0, bottom_m),
+        slab("above", 0.0, width_m, top_m, 0.4),
+    ]
+    scene = Scene.from_parts(
+        [Part.plate("floor", 3.0, 0.3, "paint"), *wall], {"paint": Lambertian(0.5), "black": Lambertian(0.001)}
+    )
+    elevation, azimuth = (a.ravel() for a in np.meshgrid(np.radians(elevations_deg), np.radians([-0.9, 0.4, 1.1])))
+    obs = np.column_stack([np.cos(elevation) * np.cos(azimuth), np.cos(elevation) * np.sin(azimuth), np.sin(elevation)])
+    sun = np.tile(unit(np.array([-0.3, 0.1, 0.95])), (len(obs), 1))
+    return scene, sun, obs, DirectRenderer(scene, 0.002).intensity(sun, obs)
+
+
 def test_a_window_narrower_than_the_grid_is_seen_through(monkeypatch):
     # A floor seen 2-4 deg above its plane through a 6 cm window in a wall 1-4 m away: the window
     # spans 1-3 deg, less than the 2.8 deg cube map, so the four grid nodes around the observer
@@ -166,23 +190,7 @@ def test_a_window_narrower_than_the_grid_is_seen_through(monkeypatch):
     import raycast.renderer.cache
 
     monkeypatch.setattr(raycast.renderer.cache, "_FACTOR_MIN_ELEMENTS", 10**9)  # every element as bits
-
-    def slab(name, y0, y1, z0, z1):
-        return Part.box(name, (0.02, y1 - y0, z1 - z0), "black", center_m=(2.6, (y0 + y1) / 2, (z0 + z1) / 2))
-
-    wall = [
-        slab("left", -0.4, 0.0, 0.0, 0.4),
-        slab("right", 0.06, 0.46, 0.0, 0.4),
-        slab("below", 0.0, 0.06, 0.0, 0.12),
-        slab("above", 0.0, 0.06, 0.18, 0.4),
-    ]
-    scene = Scene.from_parts(
-        [Part.plate("floor", 3.0, 0.3, "paint"), *wall], {"paint": Lambertian(0.5), "black": Lambertian(0.001)}
-    )
-    elevation, azimuth = (a.ravel() for a in np.meshgrid(np.radians([2.2, 3.1, 4.3]), np.radians([-0.9, 0.4, 1.1])))
-    obs = np.column_stack([np.cos(elevation) * np.cos(azimuth), np.cos(elevation) * np.sin(azimuth), np.sin(elevation)])
-    sun = np.tile(unit(np.array([-0.3, 0.1, 0.95])), (len(obs), 1))  # lights the floor, not the wall's far side
-    reference = DirectRenderer(scene, 0.002).intensity(sun, obs)
+    scene, sun, obs, reference = window_in_a_wall(0.06, 0.12, 0.18, [2.2, 3.1, 4.3])
     cache = SceneCache.build(scene, element_size_m=0.03)
     assert len(cache.poses[0].gap_word) > 0
     assert rms_mag(cache.intensity(sun, obs), reference) < 0.05
@@ -205,23 +213,7 @@ def test_the_gap_search_reaches_as_high_above_the_horizon_on_a_fine_grid(monkeyp
 
     monkeypatch.setattr(raycast.renderer.cache, "_FACTOR_MIN_ELEMENTS", 10**9)
     monkeypatch.setattr(raycast.renderer.cache, "_slit_gaps", lambda *args: 0)
-
-    def slab(name, y0, y1, z0, z1):
-        return Part.box(name, (0.02, y1 - y0, z1 - z0), "black", center_m=(2.6, (y0 + y1) / 2, (z0 + z1) / 2))
-
-    wall = [
-        slab("left", -0.4, 0.0, 0.0, 0.4),
-        slab("right", 0.02, 0.46, 0.0, 0.4),
-        slab("below", 0.0, 0.02, 0.0, 0.13),
-        slab("above", 0.0, 0.02, 0.16, 0.4),
-    ]
-    scene = Scene.from_parts(
-        [Part.plate("floor", 3.0, 0.3, "paint"), *wall], {"paint": Lambertian(0.5), "black": Lambertian(0.001)}
-    )
-    elevation, azimuth = (a.ravel() for a in np.meshgrid(np.radians([3.6, 4.3, 5.0]), np.radians([-0.9, 0.4, 1.1])))
-    obs = np.column_stack([np.cos(elevation) * np.cos(azimuth), np.cos(elevation) * np.sin(azimuth), np.sin(elevation)])
-    sun = np.tile(unit(np.array([-0.3, 0.1, 0.95])), (len(obs), 1))
-    reference = DirectRenderer(scene, 0.002).intensity(sun, obs)
+    scene, sun, obs, reference = window_in_a_wall(0.02, 0.13, 0.16, [3.6, 4.3, 5.0])
     cache = SceneCache.build(scene, element_size_m=0.03, grid_size=64)
     # (3 cm elements seeing out through a 2 cm window: within 0.1 mag of the direct renderer.)
     assert rms_mag(cache.intensity(sun, obs), reference) < 0.1
