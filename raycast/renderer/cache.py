@@ -1047,10 +1047,10 @@ def _horizon_gaps(gaps, mesh, raycaster, corners, normals, raw_bits, directions,
     too faint). For each blocked node less than ``band`` (a sine: two grid spacings, at least
     ``_GAP_BAND_MIN_RAD``) above an element's plane, ``_GAP_PROBES`` rays on each of the rings
     ``_GAP_RINGS`` grid spacings around it are cast (those above the plane); a node with one of
-    them open inside a grid cell
-    whose four nodes are all blocked is a *gap node* (where a node is open, the run time's mixed
-    pairs already cast rays), and at run time (:func:`_lit_classes`) a pair with a gap node
-    among its four nodes is decided by rays toward the exact direction.
+    them open inside a grid cell whose four nodes are all blocked is a *gap node* (where a node
+    is open, the run time's mixed pairs already cast rays), and at run time
+    (:func:`_lit_classes`) a pair with a gap node among its four nodes is decided by rays toward
+    the exact direction.
 
     Rays go into ``raycaster`` (the mesh's Open3D scene). Adds the gap pairs to ``gaps`` (a
     :class:`_GapPairs`; :func:`_gap_table` makes the run time's table of them) and returns the
