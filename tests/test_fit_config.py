@@ -128,6 +128,12 @@ def test_defaults_and_overrides():
             r"\[model\] element_size_m=-0.1 must be 0 \(the renderer's default\) or a size in metres",
         ),
         ({"model": {"element_size_m": "fine"}}, r"\[model\] element_size_m='fine' must be 0"),
+        # TOML's true is a Python int: a boolean where a number belongs is a mistake, not 1
+        ({"model": {"element_size_m": True}}, r"\[model\] element_size_m=True must be 0"),
+        ({"model": {"n_sub": True}}, r"\[model\] n_sub=True must be a whole number 0..64"),
+        ({"data": {"max_points": True}}, r"\[data\] max_points=True must be 0 \(no limit\)"),
+        ({"data": {"duration_s": False}}, r"\[data\] duration_s=False must be a number >= 0"),
+        ({"likelihood": {"correlation_time_s": True}}, r"\[likelihood\] correlation_time_s=True must be seconds"),
         ({"sampler": {"n_walker": 4}}, r"\[sampler\] has unknown keys \['n_walker'\]"),
         ({"parameters": {"spin_rate": 1.0}}, r"\[parameters\] unknown parameter 'spin_rate'; known parameters"),
         (

@@ -28,6 +28,18 @@ __all__ = ["FitConfig", "ModelConfig", "DataConfig", "LikelihoodConfig", "PERIOD
 PERIODS_PRIOR = MappingProxyType(
     {"from": "periods", "width": 0.01, "multiple": 1.0, "frame": "sidereal", "force": False}
 )
+
+
+def _whole(value) -> bool:
+    """A TOML integer (true and false are not numbers here, although Python's bool is an int)."""
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _non_negative(value) -> bool:
+    """A finite number >= 0 (not true or false)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and value >= 0
+
+
 DEFAULT_JITTER_PRIOR = Uniform(0.0, 0.5)
 
 
@@ -92,22 +104,18 @@ class ModelConfig:
             raise ValueError(f"[model] spin_axis={self.spin_axis!r} must be 'x', 'y' or 'z'")
         if self.renderer not in ("cached", "direct"):
             raise ValueError(f"[model] renderer={self.renderer!r} must be 'cached' or 'direct'")
-        if not (isinstance(self.n_sub, int) and 0 <= self.n_sub <= 64):
+        if not (_whole(self.n_sub) and 0 <= self.n_sub <= 64):
             raise ValueError(f"[model] n_sub={self.n_sub!r} must be a whole number 0..64 (0 chooses it)")
-        if not (isinstance(self.grid_size, int) and (self.grid_size == 0 or 4 <= self.grid_size <= 256)):
+        if not (_whole(self.grid_size) and (self.grid_size == 0 or 4 <= self.grid_size <= 256)):
             raise ValueError(
                 f"[model] grid_size={self.grid_size!r} must be 0 (chosen from the fit's planned work) "
                 "or a whole number 4..256"
             )
-        if not (
-            isinstance(self.element_size_m, (int, float))
-            and math.isfinite(self.element_size_m)
-            and self.element_size_m >= 0
-        ):
+        if not _non_negative(self.element_size_m):
             raise ValueError(
                 f"[model] element_size_m={self.element_size_m!r} must be 0 (the renderer's default) or a size in metres"
             )
-        if not (isinstance(self.accuracy_mag, (int, float)) and 0 < self.accuracy_mag < 1):
+        if not (_non_negative(self.accuracy_mag) and 0 < self.accuracy_mag < 1):
             raise ValueError(
                 f"[model] accuracy_mag={self.accuracy_mag!r} must be a small positive number of magnitudes"
             )
@@ -138,11 +146,11 @@ class DataConfig:
     def __post_init__(self):
         for name in ("start_s", "duration_s", "mag_err_floor", "bin_turn_deg"):
             value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+            if not _non_negative(value):
                 raise ValueError(f"[data] {name}={value!r} must be a number >= 0")
-        if not (isinstance(self.max_points, int) and (self.max_points == 0 or self.max_points >= 10)):
+        if not (_whole(self.max_points) and (self.max_points == 0 or self.max_points >= 10)):
             raise ValueError(f"[data] max_points={self.max_points!r} must be 0 (no limit) or a whole number >= 10")
-        if not (isinstance(self.windows, int) and self.windows >= 0):
+        if not (_whole(self.windows) and self.windows >= 0):
             raise ValueError(f"[data] windows={self.windows!r} must be 0 (chosen) or a whole number >= 1")
 
 
@@ -161,7 +169,7 @@ class LikelihoodConfig:
         if self.offset not in OFFSET_MODES:
             raise ValueError(f"[likelihood] offset={self.offset!r} is not one of {', '.join(OFFSET_MODES)}")
         tau = self.correlation_time_s
-        if isinstance(tau, bool) or not (isinstance(tau, (int, float)) and math.isfinite(tau) and tau >= 0):
+        if not _non_negative(tau):
             raise ValueError(
                 f"[likelihood] correlation_time_s={tau!r} must be seconds >= 0 (0: no correlated model error)"
             )
@@ -220,16 +228,14 @@ class FitConfig:
     def __post_init__(self):
         if not isinstance(self.name, str) or not self.name:
             raise ValueError(f"fit name {self.name!r} must be a non-empty string")
-        if not (isinstance(self.band_draws, int) and 0 <= self.band_draws <= 1000):
+        if not (_whole(self.band_draws) and 0 <= self.band_draws <= 1000):
             raise ValueError(
                 f"band_draws={self.band_draws!r} must be a whole number 0..1000 (posterior draws of the model band)"
             )
         for name, spec in dict(self.parameters).items():
             _check_parameter_spec(name, spec)
         object.__setattr__(self, "parameters", MappingProxyType(dict(self.parameters)))
-        if self.discard is not None and not (
-            isinstance(self.discard, int) and 0 <= self.discard < self.sampler.n_steps
-        ):
+        if self.discard is not None and not (_whole(self.discard) and 0 <= self.discard < self.sampler.n_steps):
             raise ValueError(f"discard={self.discard!r} must be a whole number below n_steps={self.sampler.n_steps}")
 
     def __reduce__(self):

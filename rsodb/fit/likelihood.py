@@ -189,9 +189,12 @@ class GaussianLikelihood:
 
     def offset_mag(self, mag_model: np.ndarray, jitter_mag: float = 0.0, flux_error: float = 0.0) -> float:
         """The offset ``c_hat`` that best aligns model to data (0 when the offset is not free)."""
+        return self._best_offset(mag_model, self._variance(mag_model, jitter_mag, flux_error))
+
+    def _best_offset(self, mag_model: np.ndarray, variance: np.ndarray) -> float:
         if self.offset == "none":
             return 0.0
-        w = self._weights(mag_model, jitter_mag, flux_error)
+        w = 1.0 / variance
         return float(np.sum(w * (self.mag_obs - mag_model)) / np.sum(w))
 
     def log_likelihood(
@@ -239,8 +242,8 @@ class GaussianLikelihood:
         ``sigma`` includes the jitter and the model's flux error (not the correlated model
         error: residual plots and the chi2 show the white part).
         """
-        shifted = mag_model + self.offset_mag(mag_model, jitter_mag, flux_error)
-        return self.mag_obs, shifted, np.sqrt(self._variance(mag_model, jitter_mag, flux_error))
+        variance = self._variance(mag_model, jitter_mag, flux_error)
+        return self.mag_obs, mag_model + self._best_offset(mag_model, variance), np.sqrt(variance)
 
     def chi2(self, mag_model: np.ndarray, jitter_mag: float = 0.0, flux_error: float = 0.0) -> float:
         """Sum of squared normalised residuals at the best offset."""
