@@ -24,7 +24,7 @@ Measured in the same run:
 
 ``--pass topex-whole``: the whole real TOPEX pass of 2024-07-30 (2320 samples over 464 s, its own
 magnitudes; the model is TOPEX's approximation, so a misfit is expected and timed, not judged),
-spin-period prior 9.2-10.2 s, jitter prior 0-1.5 mag. ``--pass paper-mesh``: the published workflow's own COSMOS 2502
+spin-period prior 9.2-10.2 s. ``--pass paper-mesh``: the published workflow's own COSMOS 2502
 mesh (from ../shared/data/models) fitted to a 600-sample pass rendered by Blender Cycles
 (the first pass of ``bench/fit_coverage.py --cycles --render-only``), with that bench's priors.
 Targets: 10 and 15 minutes for 20 x 500; ``--until-converged`` (stop at 50 autocorrelation
@@ -110,12 +110,7 @@ def whole_pass(args, argv) -> int:
     if args.pass_name == "topex-whole":
         observed = read_file(TOPEX_PHV)[0]
         record_ = config_record(args.n_sub, args.steps, args.walkers, args.processes)
-        # The model misses this pass by ~0.8 mag RMS: a jitter bounded at the default 0.5 mag
-        # would hold its walkers against the bound (as configs/topex_whole_pass.toml, 0-1.5).
-        record_["parameters"] = {
-            "spin_period_s": {"kind": "uniform", "low": 9.2, "high": 10.2},
-            "jitter_mag": {"kind": "uniform", "low": 0.0, "high": 1.5},
-        }
+        record_["parameters"] = {"spin_period_s": {"kind": "uniform", "low": 9.2, "high": 10.2}}
         what = f"the real TOPEX pass of 2024-07-30, all {len(observed)} samples, the TOPEX model"
     else:
         from bench.fit_coverage import PASSES_DIR, cycles_config, load_cycles_pass
