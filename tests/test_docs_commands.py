@@ -5,7 +5,7 @@ Each line beginning with ``rsodb `` inside a ```bash fence of README.md or docs/
 directory laid out as the docs assume: the repository's ``data_samples/``, ``../shared/data``
 beside it, an ``archive`` of the samples and of the real TOPEX pass with its periods stored, and
 ``configs/`` and a ``fit.toml`` with the repository's fit settings but a sampler of a few steps
-and a coarse cache (what the examples show is the command, not the result). Commands that a longer test already
+(what the examples show is the command, not the result). Commands that a longer test already
 runs as written are listed in `COVERED` and skipped here.
 """
 
@@ -37,8 +37,6 @@ SHORT_SAMPLER = {
     "search_points": 30,
 }
 SHORT_DATA = {"max_points": 40}
-# A coarse cache: the paper mesh's own grid (32) takes 80-150 s to build, at 16 a quarter of it.
-SHORT_MODEL = {"grid_size": 16}
 # A model band of a few draws: each draw is a model curve over the whole pass (about 1 s on the
 # real TOPEX pass), and the examples' plots need a band, not a smooth one.
 SHORT_BAND_DRAWS = 4
@@ -100,7 +98,6 @@ def short_config(path: Path) -> str:
     record = tomllib.loads(path.read_text())
     record["sampler"] = {**record.get("sampler", {}), **SHORT_SAMPLER}
     record["data"] = {**record.get("data", {}), **SHORT_DATA}
-    record["model"] = {**record.get("model", {}), **SHORT_MODEL}
     record["band_draws"] = SHORT_BAND_DRAWS
     return _toml(record)
 
@@ -117,11 +114,10 @@ def test_short_configs_keep_every_other_setting():
         short = tomllib.loads(short_config(config))
         assert short["sampler"]["n_steps"] == SHORT_SAMPLER["n_steps"]
         assert short["band_draws"] == SHORT_BAND_DRAWS
-        assert short["model"]["grid_size"] == SHORT_MODEL["grid_size"]
         shortened = ("sampler", "data", "band_draws")
         assert {k: v for k, v in short.items() if k not in shortened} == {
             k: v for k, v in original.items() if k not in shortened
-        } | {"model": original.get("model", {}) | SHORT_MODEL}, config.name
+        }, config.name
 
 
 @pytest.mark.parametrize("path", DOCS, ids=[p.name for p in DOCS])
