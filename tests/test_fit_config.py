@@ -135,6 +135,9 @@ def test_defaults_and_overrides():
         ({"data": {"duration_s": False}}, r"\[data\] duration_s=False must be a number >= 0"),
         ({"likelihood": {"correlation_time_s": True}}, r"\[likelihood\] correlation_time_s=True must be seconds"),
         ({"sampler": {"n_walker": 4}}, r"\[sampler\] has unknown keys \['n_walker'\]"),
+        ({"sampler": {"time_limit_s": True}}, r"sampler setting time_limit_s=True must be seconds >= 0"),
+        ({"sampler": {"seed": False}}, r"sampler setting seed=False must be a non-negative integer"),
+        ({"sampler": {"processes": True}}, r"sampler setting processes=True must be 0 \(all cores\)"),
         ({"parameters": {"spin_rate": 1.0}}, r"\[parameters\] unknown parameter 'spin_rate'; known parameters"),
         (
             {"parameters": {"precession_angle_deg": {"kind": "uniform", "low": 0}}},

@@ -74,6 +74,11 @@ _STEADY = 0.1
 MAX_COUNT = 10**9
 
 
+def _whole(value) -> bool:
+    """An integer (true and false are not numbers here, although Python's bool is an int)."""
+    return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
+
+
 @dataclass(frozen=True)
 class SamplerSettings:
     """How to run the sampler.
@@ -182,23 +187,19 @@ class SamplerSettings:
             "check_every",
         ):
             value = getattr(self, name)
-            if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or not 1 <= value <= MAX_COUNT:
+            if not _whole(value) or not 1 <= value <= MAX_COUNT:
                 raise ValueError(f"sampler setting {name}={value!r} must be a whole number from 1 to {MAX_COUNT:.0e}")
         if self.moves not in MOVES:
             raise ValueError(f"sampler setting moves={self.moves!r} is not one of {', '.join(MOVES)}")
         if self.init not in INITIALISERS:
             raise ValueError(f"sampler setting init={self.init!r} is not one of {', '.join(INITIALISERS)}")
-        if not (isinstance(self.processes, (int, np.integer)) and self.processes >= 0):
+        if not (_whole(self.processes) and self.processes >= 0):
             raise ValueError(
                 f"sampler setting processes={self.processes!r} must be 0 (all cores) or a positive integer"
             )
-        if not (isinstance(self.seed, (int, np.integer)) and self.seed >= 0):
+        if not (_whole(self.seed) and self.seed >= 0):
             raise ValueError(f"sampler setting seed={self.seed!r} must be a non-negative integer")
-        if not (
-            isinstance(self.settle_evals, (int, np.integer))
-            and not isinstance(self.settle_evals, bool)
-            and 0 <= self.settle_evals <= MAX_COUNT
-        ):
+        if not (_whole(self.settle_evals) and 0 <= self.settle_evals <= MAX_COUNT):
             raise ValueError(
                 f"sampler setting settle_evals={self.settle_evals!r} must be a whole number from 0 (no "
                 f"refinement) to {MAX_COUNT:.0e}"
@@ -210,7 +211,10 @@ class SamplerSettings:
         if not isinstance(self.until_converged, bool):
             raise ValueError(f"sampler setting until_converged={self.until_converged!r} must be true or false")
         if not (
-            isinstance(self.time_limit_s, (int, float)) and math.isfinite(self.time_limit_s) and self.time_limit_s >= 0
+            isinstance(self.time_limit_s, (int, float))
+            and not isinstance(self.time_limit_s, bool)
+            and math.isfinite(self.time_limit_s)
+            and self.time_limit_s >= 0
         ):
             raise ValueError(f"sampler setting time_limit_s={self.time_limit_s!r} must be seconds >= 0 (0: no limit)")
 
