@@ -6,6 +6,7 @@ should be; every other test runs.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -27,6 +28,19 @@ MISSING_SHARED = (
     f"real data not found at {SHARED_DATA}: clone the project beside the 'shared' folder (../shared/data) "
     "to run this test"
 )
+
+
+@pytest.fixture(scope="session")
+def shared_shapes(tmp_path_factory) -> Path:
+    """A shape-cache directory (rsodb.fit.shape_store) that every test of the run shares, both
+    pytest-xdist workers included: the paper mesh's cache takes ~50 s to build and two tests
+    need the same one. The store locks a key while it builds, so a second worker waits for the
+    first instead of building it again."""
+    base = tmp_path_factory.getbasetemp()
+    root = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+    path = root / "shared_shapes"
+    path.mkdir(exist_ok=True)
+    return path
 
 
 @pytest.fixture(scope="session")

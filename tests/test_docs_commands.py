@@ -129,7 +129,7 @@ def test_shown_commands_are_commands_not_synopses(path):
 
 
 @pytest.fixture(scope="module")
-def workdir(tmp_path_factory, shared_data):
+def workdir(tmp_path_factory, shared_data, shared_shapes):
     """The directory the docs' commands run in (see the module docstring)."""
     root = tmp_path_factory.mktemp("docs")
     work = root / "project"
@@ -142,7 +142,9 @@ def workdir(tmp_path_factory, shared_data):
     archive = Archive(work / "archive")
     archive.ingest([PROJECT_ROOT / "data_samples", TOPEX_PHV], progress=False)
     survey_periods(archive, processes=1, progress=False)
-    # The shape caches every file's fits share, built once here rather than once per file.
+    # The shape caches every file's fits share, built once here rather than once per file, in
+    # the run's shared store (the paper mesh's cache is also a test's of the fast path).
+    (work / "archive" / "shapes").symlink_to(shared_shapes, target_is_directory=True)
     config = FitConfig.from_toml(work / "fit.toml")
     for norad in (22076, 40358):
         stored = archive.passes(norad=norad)[0]

@@ -14,6 +14,8 @@ from raycast.renderer.cache import SceneCache, cube_grid_directions, cube_grid_w
 from raycast.renderer.direct import DirectRenderer
 from raycast.renderer.methods import render
 from raycast.renderer.scene import Articulation, Part, Scene
+from rsodb.fit.shape_store import ShapeStore
+from rsodb.fit.shapes import brightness_for, mesh_shape
 from tests.conftest import MODELS
 from tests.render_support import dark_frames_agree, geometry, rms_mag, topex_pass_geometry, unit
 
@@ -104,16 +106,21 @@ def test_convex_scene_needs_no_visibility():
 # their centroid's visibility); with k x k rays per element crossed by a shadow edge (k=2)
 # 0.0062. TOPEX: 0.0040 either way.
 @pytest.mark.parametrize("model", ["topex", "cosmos2502_paper"])
-def test_fast_path_matches_direct_along_real_topex_pass(model):
+def test_fast_path_matches_direct_along_real_topex_pass(model, shared_shapes):
     if model == "topex":
         scene, attitude = topex.build(), TOPEX_ATTITUDE
+        cache = SceneCache.build(scene, grid_size=32)
     else:
         scene = Scene.from_file(MODELS / "cosmos2502_lotos.obj", materials=MODELS / "cosmos2502_lotos.materials.json")
         attitude = COSMOS_ATTITUDE
+        # The build a fit of this mesh makes (SceneCache.build at grid 32, accuracy 0.01 mag),
+        # taken from the run's shared store: the docs' paper-mesh fit uses the same cache.
+        shape = mesh_shape(MODELS / "cosmos2502_lotos.obj", MODELS / "cosmos2502_lotos.materials.json")
+        cache, _ = brightness_for(shape, {}, {}, grid_size=32, store=ShapeStore(shared_shapes))
+        assert isinstance(cache, SceneCache) and cache.grid_size == 32
     body = topex_pass_geometry(attitude, frames=FRAMES, exposure_s=0.0)
     sun, obs = body.sun_body[:, 0], body.obs_body[:, 0]
     reference = DirectRenderer(scene, 0.02).intensity(sun, obs)
-    cache = SceneCache.build(scene, grid_size=32)
     # The edge rays are a run-time setting: one build serves both.
     for edge_rays_per_side in (1, 2):
         cached = dataclasses.replace(cache, edge_rays_per_side=edge_rays_per_side).intensity(sun, obs)
