@@ -15,7 +15,7 @@ from rsodb.archive import Archive
 from rsodb.fit.config import FitConfig
 from rsodb.fit.coverage import inject, window
 from rsodb.fit.priors import Uniform
-from rsodb.fit.result import FitResult
+from rsodb.fit.result import FitResult, assess_convergence
 from rsodb.fit.runner import FitProblem, fit_pass
 from tests.conftest import TOPEX_PHV
 
@@ -232,3 +232,25 @@ def test_the_folded_figure_of_a_whole_pass_marks_what_the_fit_did_not_see(fitted
     # Without whole_pass the figure ends where the fit's window ends.
     window_only = folded_figure(rung, windows=2)
     assert all(line.get_color() != "C0" for axis in window_only.axes for line in axis.lines)
+
+
+@pytest.mark.parametrize(
+    ("n_kept", "acceptance", "converged", "says"),
+    [
+        (3000, 0.30, True, "converged: the kept chain is 60 autocorrelation times long"),
+        # Too short: more steps are the cure.
+        (1500, 0.30, False, "only 30.0 autocorrelation times long (50 wanted; tau = 50 steps)"),
+        (1500, 0.30, False, "Run more steps (a rerun resumes the chain)."),
+        # Long enough, but the walkers hardly move: more steps are not the cure, and the verdict
+        # must not send the user to run them.
+        (3000, 0.13, False, "60 autocorrelation times long (tau = 50 steps), but mean acceptance 0.13 is outside"),
+        (3000, 0.13, False, "more steps will not change it"),
+    ],
+)
+def test_the_verdict_says_whether_more_steps_would_help(n_kept, acceptance, converged, says):
+    tau = np.array([20.0, 50.0, 35.0])
+    got, verdict = assess_convergence(n_kept, tau, np.full(20, acceptance))
+    assert got is converged
+    assert says in verdict, verdict
+    if n_kept == 3000 and not converged:
+        assert "Run more steps" not in verdict

@@ -134,8 +134,15 @@ def assess_convergence(n_kept: int, autocorr_time: np.ndarray, acceptance: np.nd
         problems.append(f"mean acceptance {mean_acceptance:.2f} is outside {low}-{high}")
     if stuck:
         problems.append(f"{stuck} walker(s) accepted under 5% of proposals (stuck)")
-    if problems:
+    if problems and lengths < MIN_AUTOCORR_LENGTHS:
         return False, "not converged: " + "; ".join(problems) + ". Run more steps (a rerun resumes the chain)."
+    if problems:
+        # Long enough, but the walkers move badly: more steps will not change that.
+        return False, (
+            f"not converged: the kept chain is {lengths:.0f} autocorrelation times long (tau = {tau:.0f} steps), "
+            f"but {'; '.join(problems)}: walkers pressed against a prior bound or split between modes "
+            "(see the trace plot); more steps will not change it"
+        )
     return True, (
         f"converged: the kept chain is {lengths:.0f} autocorrelation times long (tau = {tau:.0f} steps), "
         f"mean acceptance {mean_acceptance:.2f}"

@@ -67,6 +67,8 @@ _IMPOSSIBLE = 1e30
 # burn-in is at least ~50 of them long; burn-in takes a few of them.
 CONVERGED_TAUS = 50
 BURN_IN_TAUS = 5
+# How a run stopped by its convergence check says so (its verdict still weighs the acceptance).
+STOPPED_LONG_ENOUGH = f"stopped at {CONVERGED_TAUS} autocorrelation times"
 # Autocorrelation estimates counted as steady when they moved by less than this between checks.
 _STEADY = 0.1
 # Largest count a sampler setting takes (steps, walkers, ...): far above any real fit, and below
@@ -985,7 +987,7 @@ def _sample(sampler, start, remaining, stored, settings, chain_path, started, de
                 if converged:
                     _atomic_copy(chain_path, _backup_path(chain_path))
                     stopped = (
-                        f"stopped converged after {i} steps: {i - burn_in} steps after a burn-in of {burn_in} are "
+                        f"{STOPPED_LONG_ENOUGH} after {i} steps: {i - burn_in} steps after a burn-in of {burn_in} are "
                         f"{(i - burn_in) / np.max(tau):.0f} autocorrelation times (tau up to {np.max(tau):.0f} steps)"
                     )
                     break
@@ -993,7 +995,7 @@ def _sample(sampler, start, remaining, stored, settings, chain_path, started, de
                 _atomic_copy(chain_path, _backup_path(chain_path))
                 stopped = f"stopped at the time limit of {settings.time_limit_s:.0f} s after {i} steps"
                 break
-    if settings.until_converged and not stopped.startswith("stopped converged"):
+    if settings.until_converged and not stopped.startswith(STOPPED_LONG_ENOUGH):
         _, burn_in, _ = convergence_check(sampler.get_chain())
         stopped = stopped or f"stopped at the step limit of {settings.n_steps} steps before converging"
     return stopped, burn_in, taken
