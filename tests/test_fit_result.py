@@ -5,6 +5,7 @@ misspecified model reports its misfit."""
 from __future__ import annotations
 
 from dataclasses import replace
+from types import SimpleNamespace
 
 import h5py
 import numpy as np
@@ -14,9 +15,11 @@ from ingest import read_file
 from rsodb.archive import Archive
 from rsodb.fit.config import FitConfig
 from rsodb.fit.coverage import inject, window
+from rsodb.fit.parameters import ParameterSpace
 from rsodb.fit.priors import Uniform
-from rsodb.fit.result import FitResult, assess_convergence
+from rsodb.fit.result import FitResult, assess_convergence, prior_bound_flags
 from rsodb.fit.runner import FitProblem, fit_pass
+from rsodb.report.trust import assess
 from tests.conftest import TOPEX_PHV
 
 TRUTH = {
@@ -254,3 +257,35 @@ def test_the_verdict_says_whether_more_steps_would_help(n_kept, acceptance, conv
     assert says in verdict, verdict
     if n_kept == 3000 and not converged:
         assert "Run more steps" not in verdict
+
+
+def test_a_posterior_cut_off_by_a_chosen_prior_bound_is_flagged_and_a_physical_one_is_not():
+    space = ParameterSpace.from_names(["spin_period_s", "spin_phase_deg", "precession_angle_deg", "jitter_mag"])
+    space = space.with_prior("spin_period_s", Uniform(9.76, 9.96)).with_prior("jitter_mag", Uniform(0.0, 0.5))
+    rng = np.random.default_rng(3)
+    n = 4000
+    piled_high = 9.96 - np.abs(rng.normal(0.0, 0.004, n))  # the +-1% prior cuts it at 9.96
+    phase = np.mod(rng.normal(0.0, 2.0, n), 360.0)  # around 0 deg: a wrapped angle has no bound
+    spread = rng.uniform(0.0, 90.0, n)  # a cone the data do not constrain: 1% per edge
+    at_zero = np.abs(rng.normal(0.0, 0.01, n))  # a jitter of 0 is the data fitting, not a cut
+    flags = prior_bound_flags(space, np.column_stack([piled_high, phase, spread, at_zero]))
+    assert len(flags) == 1, flags
+    assert flags[0].startswith("at a prior bound: spin_period_s piles at its prior's upper bound 9.96 (")
+    # The jitter pressed against the 0.5 mag it was allowed (a misfit wanting more), and a cone
+    # at 90 deg (half the 0-180 deg the angle can take) are choices of the prior.
+    at_cap = 0.5 - np.abs(rng.normal(0.0, 0.002, n))
+    cone_90 = 90.0 - np.abs(rng.normal(0.0, 0.3, n))
+    flags = prior_bound_flags(space, np.column_stack([rng.uniform(9.8, 9.9, n), phase, cone_90, at_cap]))
+    assert [f.split(" piles")[0] for f in flags] == [
+        "at a prior bound: precession_angle_deg",
+        "at a prior bound: jitter_mag",
+    ]
+    # A cone at its physical 0 deg is not flagged.
+    assert prior_bound_flags(space, np.column_stack([rng.uniform(9.8, 9.9, n), phase, at_zero, spread / 180])) == []
+
+
+def test_the_trust_table_names_what_keeps_a_long_chain_from_converging():
+    _, verdict = assess_convergence(3000, np.array([50.0]), np.full(20, 0.13))
+    fit = SimpleNamespace(converged=False, verdict=verdict, flags=(), spin_periods={})
+    reasons = assess(fit, SimpleNamespace(verdict="confident", best_period_s=9.5, uncertainty_s=0.001)).reasons
+    assert reasons[0] == "chain not converged (mean acceptance 0.13 is outside 0.15-0.7)"

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
+import math
 from types import MappingProxyType
 
 import numpy as np
@@ -35,18 +36,27 @@ class Known:
     period: float | None
     default_prior: Prior
     description: str
+    # The values the quantity can take at all (a prior bound there is physical, not a choice).
+    limits: tuple[float, float] = (-math.inf, math.inf)
 
 
 # Default priors are wide; the configuration narrows them (the spin period from the stored
 # periodogram result).
 KNOWN: Mapping[str, Known] = MappingProxyType(
     {
-        "spin_period_s": Known("P", "s", None, Uniform(0.5, 1000.0), "spin period about the body spin axis"),
+        "spin_period_s": Known(
+            "P", "s", None, Uniform(0.5, 1000.0), "spin period about the body spin axis", (0.0, math.inf)
+        ),
         "spin_phase_deg": Known(
             "phi", "deg", 360.0, Uniform(0.0, 360.0), "spin phase at the reference epoch (the pass mid-time)"
         ),
         "precession_period_s": Known(
-            "P_pr", "s", None, Uniform(50.0, 5000.0), "period of the spin axis around the precession cone"
+            "P_pr",
+            "s",
+            None,
+            Uniform(50.0, 5000.0),
+            "period of the spin axis around the precession cone",
+            (0.0, math.inf),
         ),
         "precession_phase_deg": Known(
             "phi_pr", "deg", 360.0, Uniform(0.0, 360.0), "precession phase at the reference epoch (the pass mid-time)"
@@ -57,12 +67,13 @@ KNOWN: Mapping[str, Known] = MappingProxyType(
             None,
             Uniform(0.0, 90.0),
             "half-angle of the precession cone about the satellite-to-Earth-centre direction",
+            (0.0, 180.0),
         ),
         "pole_ra_deg": Known(
             "RA_pole", "deg", 360.0, Uniform(0.0, 360.0), "right ascension of an inertial spin pole (GCRS)"
         ),
         "pole_dec_deg": Known(
-            "Dec_pole", "deg", None, Uniform(-90.0, 90.0), "declination of an inertial spin pole (GCRS)"
+            "Dec_pole", "deg", None, Uniform(-90.0, 90.0), "declination of an inertial spin pole (GCRS)", (-90.0, 90.0)
         ),
         "axis_tilt_deg": Known(
             "tilt",
@@ -70,6 +81,7 @@ KNOWN: Mapping[str, Known] = MappingProxyType(
             None,
             Uniform(0.0, 30.0),
             "angle between the spin axis and the body axis named by spin_axis (inertial_tilted)",
+            (0.0, 180.0),
         ),
         "axis_tilt_azimuth_deg": Known(
             "tilt_az",
@@ -79,10 +91,10 @@ KNOWN: Mapping[str, Known] = MappingProxyType(
             "direction of that tilt about the body axis, from the next body axis in cyclic order (inertial_tilted)",
         ),
         "inertia_ratio_2": Known(
-            "I2/I1", "", None, Uniform(0.2, 5.0), "principal moment about body y over that about x"
+            "I2/I1", "", None, Uniform(0.2, 5.0), "principal moment about body y over that about x", (0.0, math.inf)
         ),
         "inertia_ratio_3": Known(
-            "I3/I1", "", None, Uniform(0.2, 5.0), "principal moment about body z over that about x"
+            "I3/I1", "", None, Uniform(0.2, 5.0), "principal moment about body z over that about x", (0.0, math.inf)
         ),
         "omega_polar_deg": Known(
             "omega_pol",
@@ -90,6 +102,7 @@ KNOWN: Mapping[str, Known] = MappingProxyType(
             None,
             Uniform(0.0, 180.0),
             "angle of the angular velocity from body +z at the epoch (torque-free body)",
+            (0.0, 180.0),
         ),
         "omega_azimuth_deg": Known(
             "omega_az",
@@ -105,12 +118,18 @@ KNOWN: Mapping[str, Known] = MappingProxyType(
             None,
             Uniform(0.1, 3.0),
             "factor on every material's reflectance (degenerate with a free magnitude offset)",
+            (0.0, math.inf),
         ),
         "roughness": Known(
-            "r", "", None, Uniform(0.05, 1.0), "roughness (Blender's, alpha = r^2) of every glossy material"
+            "r", "", None, Uniform(0.05, 1.0), "roughness (Blender's, alpha = r^2) of every glossy material", (0.0, 1.0)
         ),
         "jitter_mag": Known(
-            "s_jit", "mag", None, Uniform(0.0, 1.0), "extra Gaussian scatter added in quadrature to the observed errors"
+            "s_jit",
+            "mag",
+            None,
+            Uniform(0.0, 1.0),
+            "extra Gaussian scatter added in quadrature to the observed errors",
+            (0.0, math.inf),
         ),
         "model_error_mag": Known(
             "s_model",
@@ -118,6 +137,7 @@ KNOWN: Mapping[str, Known] = MappingProxyType(
             None,
             Uniform(0.0, 0.05),
             "RMS of the forward model's error, correlated over [likelihood] correlation_time_s",
+            (0.0, math.inf),
         ),
         "model_flux_error": Known(
             "f_model",
@@ -125,6 +145,7 @@ KNOWN: Mapping[str, Known] = MappingProxyType(
             None,
             Uniform(0.0, 0.02),
             "the forward model's error in flux, a fraction of its brightest sample ([likelihood] flux_error)",
+            (0.0, math.inf),
         ),
         "spin_period_rate_s_per_day": Known(
             "dP/dt",
@@ -135,7 +156,8 @@ KNOWN: Mapping[str, Known] = MappingProxyType(
         ),
         # The TOPEX model's surface classes, with the prior ranges docs/models.md gives sources for.
         **{
-            name: Known(name, "", None, Uniform(spec.low, spec.high), f"TOPEX model: {spec.meaning}")
+            # Reflectances, weights and roughnesses: fractions, 0-1 at most.
+            name: Known(name, "", None, Uniform(spec.low, spec.high), f"TOPEX model: {spec.meaning}", (0.0, 1.0))
             for name, spec in topex.SURFACE_PARAMETERS.items()
         },
     }

@@ -63,6 +63,7 @@ __all__ = [
     "best_and_draws",
     "chain_verdict",
     "first_kept_step",
+    "prior_bound_flags",
 ]
 
 SCHEMA_VERSION = 2
@@ -77,6 +78,10 @@ ACCEPTANCE_RANGE = (0.15, 0.7)
 # A model whose best fit misses the data by more than this many quoted errors (reduced chi2
 # with the observed errors alone) is flagged as not describing them.
 MISFIT_REDUCED_CHI2 = 2.0
+# A parameter "sits at a prior bound" when more than BOUND_SHARE of its kept samples lie within
+# BOUND_EDGE of the prior's range from that bound: a posterior spread evenly over the prior puts
+# 1% there, one cut off by the bound far more.
+BOUND_EDGE, BOUND_SHARE = 0.01, 0.05
 
 
 def first_kept_step(run, discard: int | None = None) -> int:
@@ -105,6 +110,32 @@ def best_and_draws(run, space, discard: int | None, count: int, seed: int) -> tu
     rng = np.random.default_rng(seed)
     picked = flat[rng.choice(flat.shape[0], size=min(count, flat.shape[0]), replace=False)] if count else flat[:0]
     return space.wrap(run.chain[best_index]), space.wrap(picked)
+
+
+def prior_bound_flags(space, samples: np.ndarray) -> list[str]:
+    """Warnings for the free parameters whose kept samples (n, ndim) pile up at a prior bound
+    (`BOUND_EDGE`, `BOUND_SHARE`) that is a choice, not the quantity's own limit (a jitter of 0,
+    a cone of 0 deg: `Known.limits`): there the prior, not the data, ends the interval, and
+    walkers pressed against it accept few proposals. Wrapped angles have no bound."""
+    flags = []
+    samples = np.asarray(samples, dtype=float)
+    for k, parameter in enumerate(space.free):
+        known = describe(parameter.name)
+        if known.period is not None:
+            continue
+        low, high = parameter.prior.bounds
+        edge = BOUND_EDGE * (high - low)
+        for side, bound, share, physical in (
+            ("lower", low, np.mean(samples[:, k] <= low + edge), low <= known.limits[0]),
+            ("upper", high, np.mean(samples[:, k] >= high - edge), high >= known.limits[1]),
+        ):
+            if share > BOUND_SHARE and not physical:
+                flags.append(
+                    f"at a prior bound: {parameter.name} piles at its prior's {side} bound {bound:g} "
+                    f"({100 * share:.0f}% of the kept samples within 1% of the prior's range of it): the "
+                    "prior, not the data, ends this interval; widen it if the object allows"
+                )
+    return flags
 
 
 def assess_convergence(n_kept: int, autocorr_time: np.ndarray, acceptance: np.ndarray) -> tuple[bool, str]:
@@ -492,6 +523,7 @@ class FitResult:
                     else "without a jitter term the intervals are too narrow"
                 )
             )
+        flags += prior_bound_flags(space, flat)
         if likelihood.kind == "normalised":
             flags.append(
                 "normalised comparison (the published workflow's): observed errors are ignored "

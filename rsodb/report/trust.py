@@ -85,6 +85,10 @@ def _not_converged(verdict: str) -> str:
     lengths = re.search(r"only ([\d.]+) autocorrelation times long", verdict)
     if lengths:
         return f"chain not converged ({lengths.group(1)} autocorrelation times, {MIN_AUTOCORR_LENGTHS} wanted)"
+    # Long enough, but badly mixed (`assess_convergence`): its problems, not its length.
+    mixing = re.search(r"autocorrelation times long \(tau = \d+ steps\), but (.+?): walkers", verdict)
+    if mixing:
+        return f"chain not converged ({mixing.group(1)})"
     first = verdict.split(". ")[0].split("; ")[0]
     return "chain not converged (" + first.removeprefix("not converged: ").rstrip(".") + ")"
 
