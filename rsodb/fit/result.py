@@ -52,7 +52,7 @@ import numpy as np
 from rsodb.fit.curves import ModelCurve, PassCurve
 from rsodb.fit.likelihood import flux_error_of, jitter_of
 from rsodb.fit.parameters import ParameterSpace, describe
-from rsodb.fit.sampler import autocorr_time
+from rsodb.fit.sampler import CONVERGED_TAUS, autocorr_time
 from rsodb.storage import attr_text, to_json
 
 __all__ = [
@@ -70,8 +70,8 @@ SCHEMA_VERSION = 2
 READABLE_SCHEMAS = (1, 2)
 MAX_STORED_SAMPLES = 4000
 # emcee's guidance: trust autocorrelation times, and the posterior, when the chain is at
-# least ~50 of them long.
-MIN_AUTOCORR_LENGTHS = 50
+# least ~50 of them long: the length the sampler's convergence check stops at.
+MIN_AUTOCORR_LENGTHS = CONVERGED_TAUS
 # Stretch-move acceptance is healthy in roughly 0.2-0.5; far outside, walkers are stuck or
 # the proposal scale is wrong.
 ACCEPTANCE_RANGE = (0.15, 0.7)
@@ -132,7 +132,7 @@ def prior_bound_flags(space, samples: np.ndarray) -> list[str]:
             if share > BOUND_SHARE and not physical:
                 flags.append(
                     f"at a prior bound: {parameter.name} piles at its prior's {side} bound {bound:g} "
-                    f"({100 * share:.0f}% of the kept samples within 1% of the prior's range of it): the "
+                    f"({100 * share:.0f}% of the kept samples within {100 * BOUND_EDGE:g}% of the prior's range of it): the "
                     "prior, not the data, ends this interval; widen it if the object allows"
                 )
     return flags
