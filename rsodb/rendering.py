@@ -32,7 +32,7 @@ PAPER_MODEL = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "
 
 
 def load_scene(model: str, materials=None, panel_pitch_deg: float | None = None) -> Scene:
-    """The scene of a model name (topex, cosmos2502, cosmos2502-paper) or of a mesh file.
+    """The scene of a model name (topex, topex_louvered, cosmos2502, cosmos2502-paper) or of a mesh file.
 
     Parameters
     ----------
@@ -53,7 +53,7 @@ def load_scene(model: str, materials=None, panel_pitch_deg: float | None = None)
         scene = Scene.from_file(model, materials=materials)
     else:
         raise ValueError(
-            f"model {model!r} is neither a known model (topex, cosmos2502, cosmos2502-paper) "
+            f"model {model!r} is neither a known model ({', '.join(MODELS)}, cosmos2502-paper) "
             "nor a mesh file; check the name or path"
         )
     if panel_pitch_deg is not None:

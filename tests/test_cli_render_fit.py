@@ -97,9 +97,11 @@ init = "prior"
     assert main(["fit", pass_id, "--archive", str(archive_dir), "--config", str(config), "--quiet"]) == 0
     capsys.readouterr()
     frames, gif, plot = tmp_path / "frames", tmp_path / "pass.gif", tmp_path / "replay.png"
+    glints = tmp_path / "glints.png"
     status = main(
         ["render", "--from-fit", f"{pass_id}:tiny", "--archive", str(archive_dir), "--json", "--draws", "5"]
         + ["--plot", str(plot), "--frames-png", str(frames), "--frames", "2", "--gif", str(gif), "--gif-frames", "3"]
+        + ["--glint-map", str(glints)]
     )
     assert status == 0
     summary = json.loads(capsys.readouterr().out)
@@ -107,12 +109,20 @@ init = "prior"
     assert summary["n_samples"] == len(observed) and summary["n_window"] == np.sum(observed.t_s <= 20.0)
     assert set(summary["spin_periods"]["conventions"]) == {"parameter", "orbit_frame", "inertial", "light_curve"}
     assert plot.stat().st_size > 10_000 and len(list(frames.glob("*.png"))) == 2
+    assert summary["glint_map"] == str(glints) and glints.stat().st_size > 10_000
     from PIL import Image
 
     assert Image.open(gif).n_frames == 3
 
     # The same state rendered by hand, phases at the fit's epoch (what 'rsodb render --epoch' does).
     prediction = predict_fit(archive, pass_id, "tiny", draws=0)
+    # The glint map's bisector: half the phase angle from the Sun at every sample, and the
+    # spin axis of the precessing family is its body z.
+    bisector, spin = prediction.bisector_body()
+    geometry, body = prediction.body_geometry()
+    half_phase = np.degrees(np.arccos(np.clip(np.sum(bisector * body.sun_body[:, 0], axis=1), -1.0, 1.0)))
+    np.testing.assert_allclose(half_phase, geometry.phase_angle_deg / 2.0, atol=1e-6)
+    np.testing.assert_allclose(spin, [0.0, 0.0, 1.0], atol=1e-12)
     epoch_s = float((np.datetime64(prediction.result.epoch_utc, "ns") - observed.time_utc[0]) / np.timedelta64(1, "s"))
     attitude = make_attitude("precessing", prediction.values, {"spin_axis": "z"}, epoch_s)
     # The first 40 s (the fitted 20 s and as many after) keep the direct renderer cheap.

@@ -139,10 +139,13 @@ def test_bad_configurations_say_what_to_fix(record, message):
 def test_the_real_passes_configurations_read():
     plan = LadderPlan.from_toml(PROJECT_ROOT / "configs" / "real_passes.toml")
     names = [r.name for r in plan.rungs_for(22076)]
-    assert "topex-precessing" in names and names[0] == "ellipsoid-inertial"
+    assert "topex-precessing" in names and "topex_louvered-inertial" in names and names[0] == "ellipsoid-inertial"
     assert plan.base_for(44517).parameters["spin_period_s"]["force"] is True
     whole = FitConfig.from_toml(PROJECT_ROOT / "configs" / "topex_whole_pass.toml")
     assert (whole.model.shape, whole.data.duration_s) == ("topex", 0.0)
+    louvered = FitConfig.from_toml(PROJECT_ROOT / "configs" / "topex_whole_pass_louvered.toml")
+    assert louvered.model.shape == "topex_louvered"
+    assert {"nadir_albedo", "louver_reflectance", "louver_roughness"} <= set(louvered.parameters)
 
 
 @pytest.fixture(scope="module")

@@ -11,14 +11,20 @@ from __future__ import annotations
 from dataclasses import dataclass
 import math
 
-from raycast.renderer.brdf import Lambertian, Principled
+import numpy as np
+
+from raycast.renderer.brdf import GGX, Lambertian, Principled
 from raycast.renderer.scene import Articulation, Part, Scene
 
 __all__ = [
     "build",
     "surface_brdfs",
+    "louvered_surface_brdfs",
     "SurfaceParameter",
     "SURFACE_PARAMETERS",
+    "LOUVERED_SURFACE_PARAMETERS",
+    "LOUVER_SIZE_M",
+    "LOUVER_OPEN_DEG",
     "BUS_SIZE_M",
     "BUS_FACE_AREAS_M2",
     "ARRAY_SIZE_M",
@@ -107,6 +113,45 @@ SURFACE_PARAMETERS = {
         "Kapton array substrate, diffuse 0.67 new (Space Solar Power Review 1(3), 1980), darker with age",
     ),
 }
+# The louvered variant (`build(louvers=True)`): the instrument module's walls carry thermal-control
+# louvers ("thermal control louvers in the IM walls open and close", JPL, "TOPEX/Poseidon:
+# Perspectives on an Ocean Planet", Instrument Module page), polished blades that reflect like
+# mirrors; their number, size and place on TOPEX are not published. Assumed: one louver of
+# LOUVER_SIZE_M square at the middle of each side wall, its blades (one flat plate here) turned
+# LOUVER_OPEN_DEG about the wall's horizontal axis so that their normal leans toward +z. The
+# angle is read from the residuals of the 2024-07-30 pass (docs/real_passes.md, its glint map):
+# the glints that the box cannot make fall where the Sun-observer bisector stands 12-15 deg above
+# the spin equator at three walls' azimuths. The nadir (+z) face, which carries the altimeter and
+# the radiometer, gets its own reflectance.
+LOUVER_SIZE_M = 1.0
+LOUVER_OPEN_DEG = 13.0
+LOUVERED_SURFACE_PARAMETERS = {
+    **SURFACE_PARAMETERS,
+    "nadir_albedo": SurfaceParameter(
+        0.4,
+        0.02,
+        0.9,
+        "bus nadir (+z) face: base colour, as bus_albedo for the other faces (metallic fraction and roughness shared)",
+        "as bus_albedo: black Kapton to white paint and bare aluminium (Rodriguez et al., AMOS 2007)",
+    ),
+    "louver_reflectance": SurfaceParameter(
+        0.3,
+        0.0,
+        1.0,
+        f"louvers: reflectance of a {LOUVER_SIZE_M:g} m square mirror-like plate per wall (area x reflectance is "
+        "what the light measures; the louvers' real area is not published)",
+        "polished aluminium louver blades reflect up to 0.9 (Gilmore, Spacecraft Thermal Control Handbook, 2002); "
+        "closed blades overlap and shade each other, hence 0-1",
+    ),
+    "louver_roughness": SurfaceParameter(
+        0.2,
+        0.05,
+        0.5,
+        "louvers: roughness of their glossy lobe (alpha = roughness^2)",
+        "as cells_roughness: from a polished mirror's narrow lobe to a worn blade's broad one",
+    ),
+}
+
 # Fixed parts of the surface classes (not fitted): the cells' dark diffuse layer, the dielectric
 # specular level of the bus, and the antennas' white paint.
 CELLS_DIFFUSE = 0.05
@@ -127,14 +172,7 @@ def surface_brdfs(**values) -> dict:
     dict of str to BRDF
         Keyed by the model's material names.
     """
-    unknown = sorted(set(values) - set(SURFACE_PARAMETERS))
-    if unknown:
-        raise ValueError(f"unknown TOPEX surface parameter(s) {unknown}; known: {', '.join(SURFACE_PARAMETERS)}")
-    p = {name: float(values.get(name, spec.default)) for name, spec in SURFACE_PARAMETERS.items()}
-    for name, value in p.items():
-        spec = SURFACE_PARAMETERS[name]
-        if not (math.isfinite(value) and spec.low <= value <= spec.high):
-            raise ValueError(f"TOPEX surface parameter {name}={value!r} is outside its range [{spec.low}, {spec.high}]")
+    p = _checked(values, SURFACE_PARAMETERS)
     return {
         "solar_cells": Principled(
             base_color=CELLS_DIFFUSE, roughness=p["cells_roughness"], specular_ior_level=p["cells_specular"]
@@ -151,7 +189,63 @@ def surface_brdfs(**values) -> dict:
     }
 
 
-def build(panel_pitch_deg: float = 12.0, **surface) -> Scene:
+def _checked(values, table) -> dict:
+    """Every parameter of `table` (defaults for those not given), each checked against its range."""
+    unknown = sorted(set(values) - set(table))
+    if unknown:
+        raise ValueError(f"unknown TOPEX surface parameter(s) {unknown}; known: {', '.join(table)}")
+    p = {name: float(values.get(name, spec.default)) for name, spec in table.items()}
+    for name, value in p.items():
+        spec = table[name]
+        if not (math.isfinite(value) and spec.low <= value <= spec.high):
+            raise ValueError(f"TOPEX surface parameter {name}={value!r} is outside its range [{spec.low}, {spec.high}]")
+    return p
+
+
+def louvered_surface_brdfs(**values) -> dict:
+    """`surface_brdfs` of the louvered variant: the nadir face and the louvers added.
+
+    Parameters
+    ----------
+    **values : float
+        Any of `LOUVERED_SURFACE_PARAMETERS` (the rest take their defaults).
+    """
+    p = _checked(values, LOUVERED_SURFACE_PARAMETERS)
+    brdfs = surface_brdfs(**{name: p[name] for name in SURFACE_PARAMETERS})
+    brdfs["nadir"] = Principled(
+        base_color=p["nadir_albedo"],
+        metallic=p["bus_metallic"],
+        roughness=p["bus_roughness"],
+        specular_ior_level=BUS_SPECULAR,
+    )
+    brdfs["louvers"] = GGX(color=p["louver_reflectance"], roughness=p["louver_roughness"])
+    return brdfs
+
+
+def _louvers(bus_size_m) -> list:
+    """One louver plate in front of each side wall, its normal leaning LOUVER_OPEN_DEG toward +z."""
+    tilt = math.radians(LOUVER_OPEN_DEG)
+    up = np.array([0.0, 0.0, 1.0])
+    plates = []
+    for name, outward, half in (
+        ("+x", (1.0, 0.0, 0.0), bus_size_m[0] / 2.0),
+        ("-x", (-1.0, 0.0, 0.0), bus_size_m[0] / 2.0),
+        ("+y", (0.0, 1.0, 0.0), bus_size_m[1] / 2.0),
+        ("-y", (0.0, -1.0, 0.0), bus_size_m[1] / 2.0),
+    ):
+        wall = np.array(outward)
+        across = np.cross(up, wall)
+        normal = math.cos(tilt) * wall + math.sin(tilt) * up
+        # The plate's own axes (x across the wall, y up the blade, z its normal) in body axes.
+        rotation = np.column_stack([across, np.cross(normal, across), normal])
+        # Clear of the wall: the tilted plate's lower edge stands 2 cm in front of it.
+        stand_off = half + LOUVER_SIZE_M / 2.0 * math.sin(tilt) + 0.02
+        plate = Part.plate(f"louver{name}", LOUVER_SIZE_M, LOUVER_SIZE_M, "louvers")
+        plates.append(plate.transformed(rotation=rotation, offset_m=wall * stand_off))
+    return plates
+
+
+def build(panel_pitch_deg: float = 12.0, louvers: bool = False, **surface) -> Scene:
     """The TOPEX/Poseidon scene.
 
     Parameters
@@ -159,11 +253,15 @@ def build(panel_pitch_deg: float = 12.0, **surface) -> Scene:
     panel_pitch_deg : float
         Solar-array pitch about body +y (the articulation parameter); the published fits put the
         array normal 10-12 deg from body x.
+    louvers : bool
+        The louvered variant: a louver on each side wall and the nadir face's own reflectance
+        (`LOUVERED_SURFACE_PARAMETERS`, `louvered_surface_brdfs`).
     **surface : float
-        Surface parameters (`SURFACE_PARAMETERS`); the rest take their defaults.
+        Surface parameters (`SURFACE_PARAMETERS`, or `LOUVERED_SURFACE_PARAMETERS` with
+        `louvers`); the rest take their defaults.
     """
     x_m, y_m, z_m = BUS_SIZE_M
-    bus = Part.box("bus", BUS_SIZE_M, "bus")
+    bus = Part.box("bus", BUS_SIZE_M, "bus", face_materials={"+z": "nadir"} if louvers else None)
     altimeter = Part.dish("altimeter", ALTIMETER_DIAMETER_M, ALTIMETER_DEPTH_M, "antenna").transformed(
         offset_m=(0.0, 0.0, z_m / 2.0)
     )
@@ -190,10 +288,11 @@ def build(panel_pitch_deg: float = 12.0, **surface) -> Scene:
         axis=(0.0, 1.0, 0.0),
         rest_deg=0.0,
     )
+    parts = [bus, altimeter, boom, hga, yoke, array]
     return Scene.from_parts(
-        [bus, altimeter, boom, hga, yoke, array],
-        surface_brdfs(**surface),
+        parts + _louvers(BUS_SIZE_M) if louvers else parts,
+        louvered_surface_brdfs(**surface) if louvers else surface_brdfs(**surface),
         articulations=[articulation],
         parameters={"panel_pitch_deg": panel_pitch_deg},
-        name="topex",
+        name="topex_louvered" if louvers else "topex",
     )

@@ -82,7 +82,9 @@ def register(subparsers) -> None:
         epilog=EXAMPLE,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--model", help="topex, cosmos2502, cosmos2502-paper or a mesh file (not with --from-fit)")
+    parser.add_argument(
+        "--model", help="topex, topex_louvered, cosmos2502, cosmos2502-paper or a mesh file (not with --from-fit)"
+    )
     parser.add_argument("--materials", metavar="JSON", help="materials JSON for a mesh file")
     source = parser.add_mutually_exclusive_group(required=True)
     source.add_argument("--pass", dest="pass_id", metavar="ID", help="pass id (or a unique prefix); needs --archive")
@@ -126,6 +128,12 @@ def register(subparsers) -> None:
     parser.add_argument("--draws", type=int, default=100, help="posterior draws of the --from-fit band (default 100)")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     parser.add_argument("--plot", metavar="FILE", help="save model vs observed light curve (PNG, PDF, SVG)")
+    parser.add_argument(
+        "--glint-map",
+        metavar="FILE",
+        help="with --from-fit: save the residuals mapped over the body direction of the Sun-observer bisector, "
+        "beside the directions the model's surfaces face (which smooth surface the data ask for)",
+    )
     parser.add_argument("--frames-png", metavar="DIR", help="save annotated frames of the model as PNG images")
     parser.add_argument("--frames", type=int, default=4, help="how many frames --frames-png saves (default 4)")
     parser.add_argument("--gif", metavar="FILE.gif", help="save an animation of the frames beside the light curve")
@@ -175,6 +183,8 @@ def run(args) -> int:
             raise ValueError(f"--n-sub {args.n_sub} must be a whole number from 1 to 64")
         if args.from_fit:
             return _run_fit(args)
+        if args.glint_map:
+            raise ValueError("--glint-map maps a stored fit's residuals; give --from-fit PASS[:NAME]")
         if not args.model:
             raise ValueError("give --model (a built-in name or a mesh file), or replay a fit with --from-fit PASS")
         scene = rsodb.rendering.load_scene(args.model, args.materials, args.panel_pitch_deg)
@@ -256,6 +266,9 @@ def _run_fit(args) -> int:
     if args.plot:
         rsodb.fit.plots.prediction_figure(prediction, args.plot)
         summary["plot"] = args.plot
+    if args.glint_map:
+        rsodb.fit.plots.glint_map_figure(prediction, args.glint_map)
+        summary["glint_map"] = args.glint_map
     scene = prediction.scene
     if (args.frames_png or args.gif) and scene is None:
         raise ValueError(f"the fit's shape {result.config.get('shape')!r} is analytic: it has no frames to draw")

@@ -38,7 +38,7 @@ from scipy.spatial.transform import Rotation
 
 from rsodb.fit.curves import geometry_at
 
-__all__ = ["CONVENTIONS", "spin_periods", "rates_hz", "angle_steps_about", "bisector_azimuth"]
+__all__ = ["CONVENTIONS", "spin_periods", "rates_hz", "angle_steps_about", "bisector_azimuth", "azimuth_elevation"]
 
 CONVENTIONS = {
     "parameter": "the fitted spin_period_s (precessing: relative to the precessing frame; inertial: sidereal)",
@@ -88,6 +88,26 @@ def bisector_azimuth(rotations: np.ndarray, geometry, axis) -> np.ndarray:
     bisector = np.einsum("nji,nj->ni", rotations, geometry.sun_gcrs[:, 0] + geometry.obs_gcrs[:, 0])
     _, first, second = _about(axis)
     return np.unwrap(np.arctan2(bisector @ second, bisector @ first))
+
+
+def azimuth_elevation(vectors: np.ndarray, axis) -> tuple[np.ndarray, np.ndarray]:
+    """Azimuth (0-360 deg, right-handed about `axis`) and elevation (deg toward `axis`) of body vectors.
+
+    The azimuth is counted in the axis's equator from the same first direction as
+    `bisector_azimuth` (for body z: from +x toward +y).
+
+    Parameters
+    ----------
+    vectors : (n, 3) float
+        Directions in body coordinates (need not be unit).
+    axis : int or (3,) float
+        0, 1, 2 for body x, y, z, or a direction in body coordinates.
+    """
+    up, first, second = _about(axis)
+    v = np.asarray(vectors, dtype=float)
+    v = v / np.linalg.norm(v, axis=-1, keepdims=True)
+    azimuth = np.degrees(np.arctan2(v @ second, v @ first)) % 360.0
+    return azimuth, np.degrees(np.arcsin(np.clip(v @ up, -1.0, 1.0)))
 
 
 def rates_hz(model, values, geometry, axis: str) -> dict[str, float]:

@@ -158,7 +158,7 @@ KNOWN: Mapping[str, Known] = MappingProxyType(
         **{
             # Reflectances, weights and roughnesses: fractions, 0-1 at most.
             name: Known(name, "", None, Uniform(spec.low, spec.high), f"TOPEX model: {spec.meaning}", (0.0, 1.0))
-            for name, spec in topex.SURFACE_PARAMETERS.items()
+            for name, spec in topex.LOUVERED_SURFACE_PARAMETERS.items()
         },
     }
 )

@@ -24,6 +24,7 @@ __all__ = [
     "folded_figure",
     "fold_worth",
     "prediction_figure",
+    "glint_map_figure",
     "trace_figure",
     "save_all",
 ]
@@ -305,6 +306,93 @@ def prediction_figure(prediction, path=None, mag_label: str = "magnitude"):
     top.set_title(
         f"{result.pass_id}  fit {result.name!r} replayed: posterior median and {prediction.draws} draws; "
         f"residual RMS {prediction.residual_rms_mag:.3f} mag over the window",
+        fontsize=10,
+    )
+    return _saved(figure, path)
+
+
+def _surface_directions(scene, values, axis, cell_deg: float = 2.0):
+    """{material: (azimuth, elevation, area m^2)} of the scene's surfaces at the fit's values,
+    area summed over cells of `cell_deg` in direction (a dish's hundreds of facets, a box's few)."""
+    from rsodb.fit.conventions import azimuth_elevation
+
+    posed = scene.with_parameters(**{k: values[k] for k in scene.parameters if k in values}).posed()
+    edges = posed.corners_m[:, 1:] - posed.corners_m[:, :1]
+    area = 0.5 * np.linalg.norm(np.cross(edges[:, 0], edges[:, 1]), axis=1)
+    azimuth, elevation = azimuth_elevation(posed.face_normals, axis)
+    cells = {}
+    for index, name in enumerate(scene.material_names):
+        mine = (posed.material_index == index) & (area > 0)
+        if not mine.any():
+            continue
+        keys = np.stack([np.round(azimuth[mine] / cell_deg), np.round(elevation[mine] / cell_deg)], axis=1)
+        unique, inverse = np.unique(keys, axis=0, return_inverse=True)
+        total = np.bincount(inverse.ravel(), weights=area[mine])
+        cells[name] = ((unique[:, 0] * cell_deg) % 360.0, unique[:, 1] * cell_deg, total)
+    return cells
+
+
+def glint_map_figure(prediction, path=None, min_area_m2: float = 0.05):
+    """Where in the body frame the model misses: every sample's residual at the direction of the
+    Sun-observer bisector, over the directions the model's surfaces face.
+
+    A flat, smooth surface glints when the bisector (in body coordinates) crosses its normal,
+    so a patch of samples much brighter than the model (blue) at one azimuth and elevation asks
+    for a smooth surface facing there, and a red patch for less light there. Azimuth and
+    elevation are about the median state's spin axis in the body frame (`conventions.
+    azimuth_elevation`); the hollow markers are the model's surface normals (area summed over
+    2-degree cells, cells under `min_area_m2` left out), one colour per material.
+
+    Parameters
+    ----------
+    prediction : rsodb.fit.prediction.FitPrediction
+    path : str or Path, optional
+    min_area_m2 : float
+    """
+    from rsodb.fit.conventions import azimuth_elevation
+
+    result, samples = prediction.result, prediction.samples
+    bisector, spin = prediction.bisector_body()
+    azimuth, elevation = azimuth_elevation(bisector, spin)
+    residual = samples.mag_obs - samples.mag_model
+    usable = np.isfinite(residual)
+    if not usable.any():
+        raise ValueError(f"{result.pass_id}: no sample with both an observed and a model magnitude to map")
+    limit = float(max(0.5, np.percentile(np.abs(residual[usable]), 98)))
+    low = max(-90.0, float(elevation[usable].min()) - 10.0)
+    high = min(90.0, float(elevation[usable].max()) + 10.0)
+    figure = _figure(11, 5.2)
+    axis = figure.subplots()
+    order = np.argsort(np.abs(np.where(usable, residual, 0.0)))
+    order = order[usable[order]]
+    dots = axis.scatter(
+        azimuth[order], elevation[order], c=residual[order], cmap="coolwarm", vmin=-limit, vmax=limit, s=7, lw=0
+    )
+    figure.colorbar(dots, ax=axis, label="observed - model (mag); blue: brighter than the model")
+    scene = prediction.scene
+    if scene is not None:
+        for k, (name, (az, el, area)) in enumerate(_surface_directions(scene, prediction.values, spin).items()):
+            shown = (area >= min_area_m2) & (el >= low) & (el <= high)
+            if shown.any():
+                axis.scatter(
+                    az[shown],
+                    el[shown],
+                    s=12.0 + 30.0 * np.sqrt(area[shown]),
+                    facecolors="none",
+                    edgecolors=f"C{(k + 2) % 10}",
+                    lw=1.0,
+                    label=f"{name} normals",
+                )
+        if axis.get_legend_handles_labels()[0]:
+            axis.legend(fontsize=7, loc="upper right", framealpha=0.8)
+    axis.set_xlim(0.0, 360.0)
+    axis.set_ylim(low, high)
+    axis.set_xticks(np.arange(0, 361, 45))
+    axis.set_xlabel("azimuth of the Sun-observer bisector about the spin axis, body frame (deg)")
+    axis.set_ylabel("its elevation toward the spin axis (deg)")
+    axis.set_title(
+        f"{result.pass_id} fit {result.name!r}: residuals at the bisector's body direction; spin axis (body) "
+        f"[{spin[0]:.2f}, {spin[1]:.2f}, {spin[2]:.2f}]",
         fontsize=10,
     )
     return _saved(figure, path)

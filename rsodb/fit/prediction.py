@@ -69,6 +69,24 @@ class FitPrediction:
         moved = model.on(geometry)
         return geometry, geometry.body_frame(moved.attitude_model(self.values))
 
+    def bisector_body(self) -> tuple[np.ndarray, np.ndarray]:
+        """The Sun-observer bisector in body coordinates at every sample, and the spin axis.
+
+        Returns
+        -------
+        bisector : (n, 3) float
+            Unit bisector of the Sun and observer directions, body frame, at the samples' times
+            (`samples.time_utc`): where a mirror's normal must point for it to glint.
+        spin_direction : (3,) float
+            The median state's spin axis in body coordinates (body z for attitudes without one).
+        """
+        model = self.problem.posterior.model
+        geometry, body = self.body_geometry()
+        attitude = model.on(geometry).attitude_model(self.values)
+        spin = np.asarray(getattr(attitude, "spin_direction_body", (0.0, 0.0, 1.0)), dtype=float)
+        bisector = body.sun_body[:, 0] + body.obs_body[:, 0]
+        return bisector / np.linalg.norm(bisector, axis=1)[:, None], spin / np.linalg.norm(spin)
+
 
 def fit_name_of(archive, pass_id: str, name: str | None) -> str:
     """`name`, or the pass's only fit (or its fit called "default") when `name` is None."""

@@ -131,6 +131,10 @@ def _topex():
     return topex.build()
 
 
+def _topex_louvered():
+    return topex.build(louvers=True)
+
+
 def _cosmos2502():
     return cosmos2502.build()
 
@@ -162,6 +166,16 @@ SHAPES: Mapping[str, Shape] = MappingProxyType(
             "(raycast.models.topex.SURFACE_PARAMETERS)",
             topex.SURFACE_PARAMETERS,
             topex.surface_brdfs,
+        ),
+        "topex_louvered": Shape(
+            _topex_louvered,
+            {"panel_pitch_deg": 12.0},
+            False,
+            "the topex model with a thermal louver on each instrument-module wall, its blades leaning "
+            f"{topex.LOUVER_OPEN_DEG:g} deg toward nadir, and a nadir face of its own reflectance (raycast.models.topex, build(louvers=True)); "
+            "the louvers' size, place and angle are assumed (docs/models.md)",
+            topex.LOUVERED_SURFACE_PARAMETERS,
+            topex.louvered_surface_brdfs,
         ),
         "cosmos2502": Shape(
             _cosmos2502,
