@@ -311,7 +311,7 @@ def prediction_figure(prediction, path=None, mag_label: str = "magnitude"):
     return _saved(figure, path)
 
 
-def _surface_directions(scene, values, axis, cell_deg: float = 2.0):
+def _surface_directions(scene, values, axis, cell_deg: float = 0.5):
     """{material: (azimuth, elevation, area m^2)} of the scene's surfaces at the fit's values,
     area summed over cells of `cell_deg` in direction (a dish's hundreds of facets, a box's few)."""
     from rsodb.fit.conventions import azimuth_elevation
@@ -341,7 +341,7 @@ def glint_map_figure(prediction, path=None, min_area_m2: float = 0.05):
     for a smooth surface facing there, and a red patch for less light there. Azimuth and
     elevation are about the median state's spin axis in the body frame (`conventions.
     azimuth_elevation`); the hollow markers are the model's surface normals (area summed over
-    2-degree cells, cells under `min_area_m2` left out), one colour per material.
+    half-degree cells, cells under `min_area_m2` left out), one colour per material.
 
     Parameters
     ----------
@@ -391,8 +391,8 @@ def glint_map_figure(prediction, path=None, min_area_m2: float = 0.05):
     axis.set_xlabel("azimuth of the Sun-observer bisector about the spin axis, body frame (deg)")
     axis.set_ylabel("its elevation toward the spin axis (deg)")
     axis.set_title(
-        f"{result.pass_id} fit {result.name!r}: residuals at the bisector's body direction; spin axis (body) "
-        f"[{spin[0]:.2f}, {spin[1]:.2f}, {spin[2]:.2f}]",
+        f"{result.pass_id} fit {result.name!r}\nresiduals at the Sun-observer bisector's body direction; "
+        f"spin axis (body) [{spin[0]:.2f}, {spin[1]:.2f}, {spin[2]:.2f}]",
         fontsize=10,
     )
     return _saved(figure, path)
