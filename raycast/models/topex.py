@@ -140,8 +140,8 @@ LOUVERED_SURFACE_PARAMETERS = {
         1.0,
         f"louvers: reflectance of a {LOUVER_SIZE_M:g} m square mirror-like plate per wall (area x reflectance is "
         "what the light measures; the louvers' real area is not published)",
-        "polished aluminium louver blades reflect up to 0.9 (Gilmore, Spacecraft Thermal Control Handbook, 2002); "
-        "closed blades overlap and shade each other, hence 0-1",
+        "louver blades are polished metal, and polished aluminium reflects about 0.9 of visible light; closed "
+        "blades overlap and shade each other, hence 0-1",
     ),
     "louver_roughness": SurfaceParameter(
         0.2,

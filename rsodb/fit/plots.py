@@ -15,6 +15,7 @@ import textwrap
 
 import numpy as np
 
+from rsodb.fit.conventions import azimuth_elevation
 from rsodb.fit.likelihood import NormalisedLikelihood
 from rsodb.fit.sampler import read_chain
 
@@ -314,8 +315,6 @@ def prediction_figure(prediction, path=None, mag_label: str = "magnitude"):
 def _surface_directions(scene, values, axis, cell_deg: float = 0.5):
     """{material: (azimuth, elevation, area m^2)} of the scene's surfaces at the fit's values,
     area summed over cells of `cell_deg` in direction (a dish's hundreds of facets, a box's few)."""
-    from rsodb.fit.conventions import azimuth_elevation
-
     posed = scene.with_parameters(**{k: values[k] for k in scene.parameters if k in values}).posed()
     edges = posed.corners_m[:, 1:] - posed.corners_m[:, :1]
     area = 0.5 * np.linalg.norm(np.cross(edges[:, 0], edges[:, 1]), axis=1)
@@ -349,8 +348,6 @@ def glint_map_figure(prediction, path=None, min_area_m2: float = 0.05):
     path : str or Path, optional
     min_area_m2 : float
     """
-    from rsodb.fit.conventions import azimuth_elevation
-
     result, samples = prediction.result, prediction.samples
     bisector, spin = prediction.bisector_body()
     azimuth, elevation = azimuth_elevation(bisector, spin)
