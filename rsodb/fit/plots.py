@@ -316,8 +316,7 @@ def _surface_directions(scene, values, axis, cell_deg: float = 0.5):
     """{material: (azimuth, elevation, area m^2)} of the scene's surfaces at the fit's values,
     area summed over cells of `cell_deg` in direction (a dish's hundreds of facets, a box's few)."""
     posed = scene.with_parameters(**{k: values[k] for k in scene.parameters if k in values}).posed()
-    edges = posed.corners_m[:, 1:] - posed.corners_m[:, :1]
-    area = 0.5 * np.linalg.norm(np.cross(edges[:, 0], edges[:, 1]), axis=1)
+    area = posed.areas_m2
     azimuth, elevation = azimuth_elevation(posed.face_normals, axis)
     cells = {}
     for index, name in enumerate(scene.material_names):

@@ -61,13 +61,16 @@ class FitPrediction:
         brightness = self.problem.posterior.model.brightness
         return getattr(getattr(brightness, "renderer", brightness), "scene", None)
 
-    def body_geometry(self, time_utc=None):
-        """`raycast.geometry.BodyGeometry` of the median state at `time_utc` (default: the samples')."""
-        model = self.problem.posterior.model
+    def _attitude_at(self, time_utc=None):
+        """(PassGeometry, attitude) of the median state at `time_utc` (default: the samples')."""
         times = self.samples.time_utc if time_utc is None else time_utc
         geometry = geometry_at(self.problem.observed, times, 0.0, 1, None)
-        moved = model.on(geometry)
-        return geometry, geometry.body_frame(moved.attitude_model(self.values))
+        return geometry, self.problem.posterior.model.on(geometry).attitude_model(self.values)
+
+    def body_geometry(self, time_utc=None):
+        """`raycast.geometry.BodyGeometry` of the median state at `time_utc` (default: the samples')."""
+        geometry, attitude = self._attitude_at(time_utc)
+        return geometry, geometry.body_frame(attitude)
 
     def bisector_body(self) -> tuple[np.ndarray, np.ndarray]:
         """The Sun-observer bisector in body coordinates at every sample, and the spin axis.
@@ -80,9 +83,8 @@ class FitPrediction:
         spin_direction : (3,) float
             The median state's spin axis in body coordinates (body z for attitudes without one).
         """
-        model = self.problem.posterior.model
-        geometry, body = self.body_geometry()
-        attitude = model.on(geometry).attitude_model(self.values)
+        geometry, attitude = self._attitude_at()
+        body = geometry.body_frame(attitude)
         spin = np.asarray(getattr(attitude, "spin_direction_body", (0.0, 0.0, 1.0)), dtype=float)
         bisector = body.sun_body[:, 0] + body.obs_body[:, 0]
         return bisector / np.linalg.norm(bisector, axis=1)[:, None], spin / np.linalg.norm(spin)
