@@ -425,11 +425,11 @@ def scene_rows(
     reference_cycles=REFERENCE_CYCLES,
     cycles_ladder=CYCLES_LADDER,
     cache_grids=(32,),
-    normal_step_deg=None,
+    cache_options=None,
 ):
     """Result rows of one comparison scene: Cycles at its reference and ladder settings, the
     direct renderer at several pixel sizes, the fast path at each of ``cache_grids`` (its
-    cube-map sizes; if ``with_cache``), each on the
+    cube-map sizes; if ``with_cache``; built with ``cache_options``, see :func:`cache_label`), each on the
     tumble frames (Cycles on every ``tumble_stride``-th) and the hard frames. Without Cycles
     the reference is the direct renderer at its finest pixel size and only the fast path is
     compared with it."""
@@ -518,7 +518,7 @@ def scene_rows(
                 setup_s=setup_cpu,
             )
     for grid in cache_grids if with_cache else ():
-        cache, build_wall, build_cpu, peak_mb = traced_build(scene, grid, normal_step_deg)
+        cache, build_wall, build_cpu, peak_mb = traced_build(scene, grid, **(cache_options or {}))
         for frames, fs in frame_sets.items():
             # Timed on all 150 tumble frames (a whole light curve); compared on Cycles' frames.
             timing_frames = tumble if frames == "tumble" else fs
@@ -526,7 +526,7 @@ def scene_rows(
             values = cache.intensity(fs.sun_body, fs.obs_body)
             row(
                 "cached",
-                f"grid {grid}" + (f", normal step {normal_step_deg:g} deg" if normal_step_deg else ""),
+                f"grid {grid}" + "".join(f", {part}" for part in cache_label(cache_options)),
                 frames,
                 mag_difference(values, references[frames]),
                 cpu * 150 / len(timing_frames),
@@ -561,7 +561,18 @@ def compiled_loops() -> int:
     return count
 
 
-def traced_build(scene, grid, normal_step_deg=None):
+def cache_label(options, title=False):
+    """Words for the fast path's build options that differ from its own rules, for a row's
+    setting (``{"normal_step_deg": 6}`` -> ["normal step 6 deg"]) or a section's ``title``
+    (["shading normals in steps of 6 deg"])."""
+    words = {
+        "normal_step_deg": ("normal step {:g} deg", "shading normals in steps of {:g} deg"),
+        "normal_bins_per_step": ("{:g} normal bins per step", "shading classes {:g} per normal step"),
+    }
+    return [words[key][title].format(value) for key, value in (options or {}).items() if value is not None]
+
+
+def traced_build(scene, grid, **options):
     """(cache, build wall s, build CPU s, traced peak MB) of the fast path's build. A build that
     compiled (or loaded from numba's cache) one of the renderer's loops is built again: numba's
     compiler allocates through Python too, so on a fresh installation the first build of a scene
@@ -573,7 +584,7 @@ def traced_build(scene, grid, normal_step_deg=None):
         loops = compiled_loops()
         tracemalloc.start()
         cache, build_wall, build_cpu = timed(
-            lambda: SceneCache.build(scene, grid_size=grid, normal_step_deg=normal_step_deg)
+            lambda: SceneCache.build(scene, grid_size=grid, **{k: v for k, v in options.items() if v is not None})
         )
         peak_mb = tracemalloc.get_traced_memory()[1] / 1e6
         tracemalloc.stop()
@@ -623,7 +634,7 @@ def scenes_chart(rows, path, reference_cycles=REFERENCE_CYCLES):
 
 
 def scenes_section(
-    rows, load, stride, per_kind, with_cycles=True, reference_cycles=REFERENCE_CYCLES, normal_step_deg=None
+    rows, load, stride, per_kind, with_cycles=True, reference_cycles=REFERENCE_CYCLES, cache_options=None
 ):
     reference = (
         f"Reference: Cycles {reference_cycles[0]}^2 px x {reference_cycles[1]} samples, object terminator "
@@ -635,8 +646,8 @@ def scenes_section(
     title = "Renderers against Cycles on the comparison scenes" if with_cycles else "Fast path on the comparison scenes"
     if with_cycles and reference_cycles != REFERENCE_CYCLES:
         title = f"Renderers against a {reference_cycles[1]}-sample Cycles reference on the comparison scenes"
-    if normal_step_deg:
-        title += f", the fast path's shading normals in steps of {normal_step_deg:g} deg"
+    if cache_label(cache_options):
+        title += ", the fast path's " + " and ".join(cache_label(cache_options, title=True))
     lines = [
         f"## {title} ({today()}, bench/render.py --scenes)\n",
         f"The scenes and frame sets of raycast.cycles.comparison: tumble frames (one 40 s spin, phase "
@@ -711,6 +722,7 @@ def run_scenes(args, argv):
     names = tuple(args.scenes.split(",")) if args.scenes != "all" else None
     comparisons = comparison_scenes(MODELS, *([names] if names else []))
     load = os.getloadavg()[0]
+    cache_options = {"normal_step_deg": args.cache_normal_step_deg, "normal_bins_per_step": args.cache_normal_bins}
     # --partial keeps the rows of finished scenes in a JSON file, so a stopped run resumes.
     partial = Path(args.partial) if args.partial else None
     rows = json.loads(partial.read_text()) if partial and partial.exists() else []
@@ -727,7 +739,7 @@ def run_scenes(args, argv):
             reference_cycles=args.cycles_reference,
             cycles_ladder=args.cycles_ladder,
             cache_grids=args.cache_grids,
-            normal_step_deg=args.cache_normal_step_deg,
+            cache_options=cache_options,
         )
         if partial:
             partial.write_text(json.dumps(rows))
@@ -748,7 +760,7 @@ def run_scenes(args, argv):
         args.per_kind,
         not args.no_cycles,
         args.cycles_reference,
-        args.cache_normal_step_deg,
+        cache_options,
     )
     print(section)
     name = "render_scenes" if not args.no_cycles else "render_scenes_fast_path"
@@ -756,6 +768,7 @@ def run_scenes(args, argv):
     name += "" if default_reference or args.no_cycles else f"_reference_{args.cycles_reference[1]}spp"
     # So is a run with the fast path's shading normals set coarser or finer than its own rule.
     name += f"_normal_step_{args.cache_normal_step_deg:g}deg" if args.cache_normal_step_deg else ""
+    name += f"_normal_bins_{args.cache_normal_bins:g}" if args.cache_normal_bins else ""
     record(name, command("render.py", argv), scenes_figures(rows), section, data=rows)
     return 0
 
@@ -802,6 +815,13 @@ def main(argv=None):
         default=None,
         help="with --scenes: the fast path's largest shading-normal turn within a piece, every material "
         "(default: each material's own rule, a fraction of its lobe)",
+    )
+    parser.add_argument(
+        "--cache-normal-bins",
+        type=float,
+        default=None,
+        help="with --scenes: the fast path's shading classes per normal step (SceneCache.build's "
+        "normal_bins_per_step; default its own, 3)",
     )
     parser.add_argument(
         "--cycles-reference",

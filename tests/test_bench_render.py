@@ -30,10 +30,15 @@ def test_traced_build_measures_a_build_that_compiled_nothing():
     assert wall > 0 and cpu > 0
 
 
-def test_the_normal_step_option_reaches_the_build():
-    from bench.render import traced_build
+def test_the_normal_options_reach_the_build_and_name_the_rows():
+    from bench.render import cache_label, traced_build
     from raycast.cycles.comparison import comparison_scenes
 
     plate = comparison_scenes(ROOT.parent / "shared" / "data" / "models", ("plate",))["plate"].scene
-    assert traced_build(plate, 4, 6.0)[0].normal_step_deg == pytest.approx(6.0, abs=1e-9)
+    assert traced_build(plate, 4, normal_step_deg=6.0)[0].normal_step_deg == pytest.approx(6.0, abs=1e-9)
     assert traced_build(plate, 4)[0].normal_step_deg != pytest.approx(6.0, abs=0.1)  # the material's own rule
+    assert traced_build(plate, 4, normal_bins_per_step=1.5)[0].normal_bins_per_step == 1.5
+    assert traced_build(plate, 4, normal_bins_per_step=None)[0].normal_bins_per_step == 3.0
+    options = {"normal_step_deg": None, "normal_bins_per_step": 1.0}
+    assert cache_label(options) == ["1 normal bins per step"]
+    assert cache_label(options, title=True) == ["shading classes 1 per normal step"]
