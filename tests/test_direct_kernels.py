@@ -101,6 +101,30 @@ def _box_corners(low, high):
     return np.array(corners)
 
 
+def test_smooth_hits_are_the_numpy_gathers_of_the_hits_they_name():
+    rng = np.random.default_rng(7)
+    n_hits, n_frames, n_tri = 300, 5, 11
+    frames, prim = rng.integers(0, n_frames, n_hits), rng.integers(0, n_tri, n_hits)
+    uv = rng.uniform(0.0, 0.5, size=(n_hits, 2)).astype(np.float32)
+    face_normals = _unit(rng.normal(size=(n_tri, 3)))
+    corner_normals = _unit(face_normals[:, None, :] + 0.3 * rng.normal(size=(n_tri, 3, 3)))
+    obs = _unit(rng.normal(size=(n_frames, 3)))
+    cos_o = face_normals @ obs.T
+    rest = np.sort(rng.choice(n_hits, 120, replace=False))
+    got_frames, got_prim, normals, geo = _direct_kernels.smooth_hits(
+        rest, frames, prim, uv, face_normals, cos_o, corner_normals
+    )
+    np.testing.assert_array_equal(got_frames, frames[rest])
+    np.testing.assert_array_equal(got_prim, prim[rest])
+    turned = face_normals[prim[rest]] * np.where(cos_o[prim[rest], frames[rest]] < 0.0, -1.0, 1.0)[:, None]
+    np.testing.assert_array_equal(geo, turned)
+    assert (geo[:, None, :] @ obs[frames[rest], :, None]).min() > 0.0  # all toward the observer
+    expected = turned.copy()
+    _direct_kernels.interpolated_normals(expected, np.arange(len(rest)), prim[rest], uv[rest], corner_normals)
+    np.testing.assert_allclose(normals, expected, rtol=0, atol=1e-15)
+    assert np.einsum("ij,ij->i", normals, geo).min() > 0.0  # each on its face's seen side
+
+
 def test_need_shadow_rays_only_under_another_group():
     # A 4 x 4 m block (group 0) with a 1 x 1 m plate (group 1) hovering 1 m above its left
     # half; the Sun straight above. Hits on the block's top under the plate need a shadow ray;

@@ -289,6 +289,37 @@ def flat_sums(frames, prim, blocked, smooth, flat_table, out):
 
 
 @njit(cache=True, nogil=True)
+def smooth_hits(rest, frames, prim, uv, face_normals, cos_o, corner_normals):
+    """The hits ``rest`` (of :func:`flat_sums`) on smooth-shaded triangles, ready to shade:
+    their frames and triangles, their shading normals (the barycentric mix of the triangle's
+    corner normals, as :func:`interpolated_normals`) and their face normals, both turned toward
+    the observer (``cos_o`` (t, m): face normal . observer). One pass instead of numpy's
+    gathers and copies of (k, 3) arrays."""
+    k = len(rest)
+    out_frames = np.empty(k, dtype=np.int64)
+    out_prim = np.empty(k, dtype=np.int64)
+    normals = np.empty((k, 3))
+    geo = np.empty((k, 3))
+    for r in range(k):
+        n = rest[r]
+        f, t = frames[n], prim[n]
+        out_frames[r], out_prim[r] = f, t
+        side = -1.0 if cos_o[t, f] < 0.0 else 1.0
+        gx, gy, gz = side * face_normals[t, 0], side * face_normals[t, 1], side * face_normals[t, 2]
+        geo[r, 0], geo[r, 1], geo[r, 2] = gx, gy, gz
+        a, b = uv[n, 0], uv[n, 1]
+        c = 1.0 - a - b
+        x = c * corner_normals[t, 0, 0] + a * corner_normals[t, 1, 0] + b * corner_normals[t, 2, 0]
+        y = c * corner_normals[t, 0, 1] + a * corner_normals[t, 1, 1] + b * corner_normals[t, 2, 1]
+        z = c * corner_normals[t, 0, 2] + a * corner_normals[t, 1, 2] + b * corner_normals[t, 2, 2]
+        norm = np.sqrt(x * x + y * y + z * z)
+        if x * gx + y * gy + z * gz < 0.0:
+            norm = -norm
+        normals[r, 0], normals[r, 1], normals[r, 2] = x / norm, y / norm, z / norm
+    return out_frames, out_prim, normals, geo
+
+
+@njit(cache=True, nogil=True)
 def need_shadow_rays(corners, group, sun, axis_u, axis_v, cell, owners, prim, shadow_rays):
     """(k,) bool: which hits' shadow rays can meet something; the others are lit for certain.
 

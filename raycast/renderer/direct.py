@@ -304,23 +304,21 @@ class DirectRenderer:
             begin = end
             if len(frames) == 0:
                 continue
-            # Shadow rays only where something of another group rises above the hit.
-            need = (
-                _direct_kernels.need_shadow_rays(
+            if groups is None:  # every hit casts its ray
+                blocked = scene.test_occlusions(shadow_rays).numpy()
+            else:
+                # Shadow rays only where something of another group rises above the hit.
+                need = _direct_kernels.need_shadow_rays(
                     corners, groups, sun_body, sun_u, sun_v, cell, frames, prim, shadow_rays
                 )
-                if groups is not None
-                else np.ones(len(frames), dtype=bool)
-            )
-            blocked = np.zeros(len(frames), dtype=bool)
-            if need.any():
-                blocked[need] = scene.test_occlusions(shadow_rays[need]).numpy()
+                blocked = np.zeros(len(frames), dtype=bool)
+                if need.any():
+                    blocked[need] = scene.test_occlusions(shadow_rays[need]).numpy()
             rest = _direct_kernels.flat_sums(frames, prim, blocked, smooth, flat_table, result)
             if len(rest):
-                frames, prim = frames[rest], prim[rest]
-                geo_normals = mesh.face_normals[prim] * np.where(cos_o[prim, frames] < 0.0, -1.0, 1.0)[:, None]
-                normals = geo_normals.copy()
-                _direct_kernels.interpolated_normals(normals, np.arange(len(rest)), prim, uv[rest], mesh.corner_normals)
+                frames, prim, normals, geo_normals = _direct_kernels.smooth_hits(
+                    rest, frames, prim, uv, mesh.face_normals, cos_o, mesh.corner_normals
+                )
                 self._radiance(
                     mesh.material_index[prim],
                     normals,
