@@ -634,7 +634,7 @@ def scenes_chart(rows, path, reference_cycles=REFERENCE_CYCLES):
 
 
 def scenes_section(
-    rows, load, stride, per_kind, with_cycles=True, reference_cycles=REFERENCE_CYCLES, cache_options=None
+    rows, load, stride, per_kind, with_cycles=True, reference_cycles=REFERENCE_CYCLES, cache_options=None, subset=()
 ):
     reference = (
         f"Reference: Cycles {reference_cycles[0]}^2 px x {reference_cycles[1]} samples, object terminator "
@@ -648,6 +648,8 @@ def scenes_section(
         title = f"Renderers against a {reference_cycles[1]}-sample Cycles reference on the comparison scenes"
     if cache_label(cache_options):
         title += ", the fast path's " + " and ".join(cache_label(cache_options, title=True))
+    if subset:
+        title += f", {', '.join(subset)} only"
     lines = [
         f"## {title} ({today()}, bench/render.py --scenes)\n",
         f"The scenes and frame sets of raycast.cycles.comparison: tumble frames (one 40 s spin, phase "
@@ -717,7 +719,7 @@ def scenes_figures(rows):
 
 
 def run_scenes(args, argv):
-    from raycast.cycles.comparison import comparison_scenes
+    from raycast.cycles.comparison import SCENE_NAMES, comparison_scenes
 
     names = tuple(args.scenes.split(",")) if args.scenes != "all" else None
     comparisons = comparison_scenes(MODELS, *([names] if names else []))
@@ -746,9 +748,16 @@ def run_scenes(args, argv):
     if args.quick:
         return 0
     default_reference = args.cycles_reference == REFERENCE_CYCLES
+    # A run of the default settings on some of the scenes is its own benchmark (section, chart,
+    # history name): it does not replace the whole table. (Runs with other settings are their
+    # own already, named by those.)
+    plain = default_reference and not cache_label(cache_options)
+    subset = tuple(comparisons) if plain and set(comparisons) != set(SCENE_NAMES) else ()
     if not args.no_cycles:
         chart = (
-            SCENES_CHART
+            SCENES_CHART.with_name(f"{SCENES_CHART.stem}_{'_'.join(subset)}{SCENES_CHART.suffix}")
+            if subset
+            else SCENES_CHART
             if default_reference
             else SCENES_CHART.with_name(f"{SCENES_CHART.stem}_ref{args.cycles_reference[1]}{SCENES_CHART.suffix}")
         )
@@ -761,6 +770,7 @@ def run_scenes(args, argv):
         not args.no_cycles,
         args.cycles_reference,
         cache_options,
+        subset,
     )
     print(section)
     name = "render_scenes" if not args.no_cycles else "render_scenes_fast_path"
@@ -769,6 +779,7 @@ def run_scenes(args, argv):
     # So is a run with the fast path's shading normals set coarser or finer than its own rule.
     name += f"_normal_step_{args.cache_normal_step_deg:g}deg" if args.cache_normal_step_deg else ""
     name += f"_normal_bins_{args.cache_normal_bins:g}" if args.cache_normal_bins else ""
+    name += "".join(f"_{scene}" for scene in subset)
     record(name, command("render.py", argv), scenes_figures(rows), section, data=rows)
     return 0
 
