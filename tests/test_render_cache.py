@@ -372,8 +372,9 @@ def test_smooth_glossy_cylinder_glint_matches_direct():
         assert rms_mag(cached[bright], reference[bright]) < 0.01
         # Frames 1000x fainter than the glint are grazing silhouettes: judged in light, not magnitudes.
         assert np.abs(cached - reference).max() < peak_share * reference.max()
-    with pytest.raises(ValueError, match="normal_bins_per_step=0.5 must be a number >= 1"):
-        SceneCache.build(scene, normal_bins_per_step=0.5)
+    for bad in (0.5, math.inf, True):
+        with pytest.raises(ValueError, match=f"normal_bins_per_step={bad!r} must be a number >= 1"):
+            SceneCache.build(scene, normal_bins_per_step=bad)
 
 
 @pytest.mark.parametrize("per_side", [1, 2, 3, 4])
