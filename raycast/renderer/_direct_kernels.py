@@ -90,21 +90,27 @@ def sunward_hits(frames, prim, points, face_normals, sun, obs, offset):
     return normals, lit[:count], rays
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _corner_mix(corner_normals, t, a, b, sx, sy, sz):
+    """Triangle t's corner normals mixed at barycentric (a, b), normalised and turned to the
+    side of (sx, sy, sz)."""
+    c = 1.0 - a - b
+    x = c * corner_normals[t, 0, 0] + a * corner_normals[t, 1, 0] + b * corner_normals[t, 2, 0]
+    y = c * corner_normals[t, 0, 1] + a * corner_normals[t, 1, 1] + b * corner_normals[t, 2, 1]
+    z = c * corner_normals[t, 0, 2] + a * corner_normals[t, 1, 2] + b * corner_normals[t, 2, 2]
+    norm = np.sqrt(x * x + y * y + z * z)
+    if x * sx + y * sy + z * sz < 0.0:
+        norm = -norm
+    return x / norm, y / norm, z / norm
+
+
 @njit(cache=True, nogil=True)
 def interpolated_normals(normals, rows, prim, uv, corner_normals):
     """Replace ``normals[rows]`` by the barycentric mix of their triangle's corner normals,
     normalised and turned to the side of the normal it replaces (in place)."""
     for n in rows:
-        t = prim[n]
-        a, b = uv[n, 0], uv[n, 1]
-        c = 1.0 - a - b
-        x = c * corner_normals[t, 0, 0] + a * corner_normals[t, 1, 0] + b * corner_normals[t, 2, 0]
-        y = c * corner_normals[t, 0, 1] + a * corner_normals[t, 1, 1] + b * corner_normals[t, 2, 1]
-        z = c * corner_normals[t, 0, 2] + a * corner_normals[t, 1, 2] + b * corner_normals[t, 2, 2]
-        norm = np.sqrt(x * x + y * y + z * z)
-        if x * normals[n, 0] + y * normals[n, 1] + z * normals[n, 2] < 0.0:
-            norm = -norm
-        normals[n, 0], normals[n, 1], normals[n, 2] = x / norm, y / norm, z / norm
+        x, y, z = _corner_mix(corner_normals, prim[n], uv[n, 0], uv[n, 1], normals[n, 0], normals[n, 1], normals[n, 2])
+        normals[n, 0], normals[n, 1], normals[n, 2] = x, y, z
 
 
 @njit(cache=True, nogil=True)
@@ -292,7 +298,7 @@ def flat_sums(frames, prim, blocked, smooth, flat_table, out):
 def smooth_hits(rest, frames, prim, uv, face_normals, cos_o, corner_normals):
     """The hits ``rest`` (of :func:`flat_sums`) on smooth-shaded triangles, ready to shade:
     their frames and triangles, their shading normals (the barycentric mix of the triangle's
-    corner normals, as :func:`interpolated_normals`) and their face normals, both turned toward
+    corner normals, :func:`_corner_mix`) and their face normals, both turned toward
     the observer (``cos_o`` (t, m): face normal . observer). One pass instead of numpy's
     gathers and copies of (k, 3) arrays."""
     k = len(rest)
@@ -307,15 +313,8 @@ def smooth_hits(rest, frames, prim, uv, face_normals, cos_o, corner_normals):
         side = -1.0 if cos_o[t, f] < 0.0 else 1.0
         gx, gy, gz = side * face_normals[t, 0], side * face_normals[t, 1], side * face_normals[t, 2]
         geo[r, 0], geo[r, 1], geo[r, 2] = gx, gy, gz
-        a, b = uv[n, 0], uv[n, 1]
-        c = 1.0 - a - b
-        x = c * corner_normals[t, 0, 0] + a * corner_normals[t, 1, 0] + b * corner_normals[t, 2, 0]
-        y = c * corner_normals[t, 0, 1] + a * corner_normals[t, 1, 1] + b * corner_normals[t, 2, 1]
-        z = c * corner_normals[t, 0, 2] + a * corner_normals[t, 1, 2] + b * corner_normals[t, 2, 2]
-        norm = np.sqrt(x * x + y * y + z * z)
-        if x * gx + y * gy + z * gz < 0.0:
-            norm = -norm
-        normals[r, 0], normals[r, 1], normals[r, 2] = x / norm, y / norm, z / norm
+        x, y, z = _corner_mix(corner_normals, t, uv[n, 0], uv[n, 1], gx, gy, gz)
+        normals[r, 0], normals[r, 1], normals[r, 2] = x, y, z
     return out_frames, out_prim, normals, geo
 
 
