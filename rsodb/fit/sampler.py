@@ -919,7 +919,6 @@ def run_sampler(
         # The global search may take half of the time limit; sampling stops at the whole of it.
         deadline = started + 0.5 * settings.time_limit_s if settings.time_limit_s else None
         evaluator = _Evaluator(posterior, search_posterior, pool, deadline, progress)
-        sampler = None
         if stored == 0:
             rng = np.random.default_rng(settings.seed)
             positions, init_info = INITIALISERS[settings.init](posterior, settings, rng, evaluator)
@@ -927,6 +926,12 @@ def run_sampler(
             with h5py.File(chain_path, "a") as handle:
                 handle.attrs["rsodb_run"] = json.dumps(identity)
                 handle.attrs["rsodb_init"] = json.dumps(init_info)
+            start = emcee.State(positions, random_state=np.random.RandomState(settings.seed).get_state())
+        else:
+            with h5py.File(chain_path, "r") as handle:
+                init_info = dict(json.loads(handle.attrs.get("rsodb_init", "{}")), resumed_at=stored)
+            start = None  # continue from the backend's last step and random state
+        if remaining:
             sampler = emcee.EnsembleSampler(
                 settings.n_walkers,
                 space.ndim,
@@ -935,22 +940,7 @@ def run_sampler(
                 backend=backend,
                 moves=_moves(settings.moves, space.ndim),
             )
-            state = emcee.State(positions, random_state=np.random.RandomState(settings.seed).get_state())
-        else:
-            with h5py.File(chain_path, "r") as handle:
-                init_info = dict(json.loads(handle.attrs.get("rsodb_init", "{}")), resumed_at=stored)
-            if remaining:
-                sampler = emcee.EnsembleSampler(
-                    settings.n_walkers,
-                    space.ndim,
-                    evaluator.log_prob,
-                    pool=pool,
-                    backend=backend,
-                    moves=_moves(settings.moves, space.ndim),
-                )
-                state = None  # continue from the backend's last step and random state
-        if remaining:
-            start = state if state is not None else backend.get_last_sample()
+            start = start if start is not None else backend.get_last_sample()
             stopped, burn_in, steps_done = _sample(
                 sampler, start, remaining, stored, settings, chain_path, started, description, progress
             )
