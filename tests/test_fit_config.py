@@ -131,6 +131,10 @@ def test_defaults_and_overrides():
         # TOML's true is a Python int: a boolean where a number belongs is a mistake, not 1
         ({"model": {"element_size_m": True}}, r"\[model\] element_size_m=True must be 0"),
         ({"model": {"n_sub": True}}, r"\[model\] n_sub=True must be a whole number 0..64"),
+        # half a bin per normal step would smear a glint (0.026 mag on the all-Glossy mesh)
+        ({"model": {"normal_bins_per_step": 0.5}}, r"\[model\] normal_bins_per_step=0.5 must be 0 \(the renderer's"),
+        ({"model": {"normal_bins_per_step": True}}, r"\[model\] normal_bins_per_step=True must be 0"),
+        ({"model": {"normal_bins_per_step": float("inf")}}, r"\[model\] normal_bins_per_step=inf must be 0"),
         ({"data": {"max_points": True}}, r"\[data\] max_points=True must be 0 \(no limit\)"),
         ({"data": {"duration_s": False}}, r"\[data\] duration_s=False must be a number >= 0"),
         ({"likelihood": {"correlation_time_s": True}}, r"\[likelihood\] correlation_time_s=True must be seconds"),

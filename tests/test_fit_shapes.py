@@ -115,6 +115,23 @@ def test_the_element_size_reaches_the_cache_and_its_key(tmp_path, template):
     assert len(list((tmp_path / "shapes").glob("*.pkl"))) == 2
 
 
+def test_the_normal_bins_reach_the_cache_and_its_key(tmp_path, template):
+    # [model] normal_bins_per_step sets the cache's shading classes per normal step (1: fewer
+    # classes) and is part of the stored cache's key; 0 keeps the renderer's default and key.
+    obj, materials = write_box(tmp_path)
+    store = ShapeStore(tmp_path / "shapes")
+
+    def cache_of(model):
+        model = {"mesh": str(obj), "materials": str(materials), "n_sub": 1, "grid_size": 8, **model}
+        problem = FitProblem.build(template, FitConfig.from_dict({"model": model, "parameters": PRIOR}), store=store)
+        return problem.posterior.model.brightness
+
+    default, same, coarse = cache_of({}), cache_of({"normal_bins_per_step": 0}), cache_of({"normal_bins_per_step": 1})
+    assert same is default
+    assert (default.normal_bins_per_step, coarse.normal_bins_per_step) == (3.0, 1.0)
+    assert len(list((tmp_path / "shapes").glob("*.pkl"))) == 2
+
+
 def test_the_stored_cache_is_reused_and_keyed_by_content(tmp_path, template, monkeypatch):
     obj, materials = write_box(tmp_path)
     record = {"model": {"mesh": str(obj), "materials": str(materials), "n_sub": 1}, "parameters": PRIOR}

@@ -160,6 +160,7 @@ class FitProblem:
             grid_size=config.model.grid_size
             or cache_grid_size(planned_frame_evaluations(config, observed, selection, bounds)),
             element_size_m=config.model.element_size_m,
+            normal_bins_per_step=config.model.normal_bins_per_step,
             progress=progress,
             store=store,
             name=shape_name,

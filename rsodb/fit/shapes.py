@@ -410,10 +410,13 @@ def _build_cache(
     grid_size: int,
     progress: bool,
     element_size_m: float = 0.0,
+    normal_bins_per_step: float = 0.0,
 ):
     options = {"grid_size": grid_size}
     if element_size_m:
         options["element_size_m"] = element_size_m
+    if normal_bins_per_step:
+        options["normal_bins_per_step"] = normal_bins_per_step
     if smoothest_roughness is not None:
         smooth = scene.with_brdfs(
             **{
@@ -443,6 +446,7 @@ def brightness_for(
     accuracy_mag: float = 0.01,
     grid_size: int = CACHE_GRID_SIZE,
     element_size_m: float = 0.0,
+    normal_bins_per_step: float = 0.0,
     pixel_size_m: float = 0.05,
     progress: bool = False,
     store: ShapeStore | None = None,
@@ -467,6 +471,8 @@ def brightness_for(
         The cache's cube-map resolution (:func:`cache_grid_size`).
     element_size_m : float
         The cache's largest element on shadowable sides (0: its default, the mesh radius / 30).
+    normal_bins_per_step : float
+        The cache's shading classes per normal step (0: its default, 3).
     pixel_size_m : float
         Ray spacing of the direct renderer.
     progress : bool
@@ -524,6 +530,8 @@ def brightness_for(
             settings["grid_size"] = int(grid_size)
         if element_size_m:
             settings["element_size_m"] = float(element_size_m)  # the same: only when given
+        if normal_bins_per_step:
+            settings["normal_bins_per_step"] = float(normal_bins_per_step)
         build = functools.partial(
             _build_cache,
             scene,
@@ -533,6 +541,7 @@ def brightness_for(
             int(grid_size),
             progress,
             float(element_size_m),
+            float(normal_bins_per_step),
         )
         base = (store or ShapeStore()).get(scene, settings, build)
     elif renderer == "direct":
