@@ -285,7 +285,18 @@ def test_a_posterior_cut_off_by_a_chosen_prior_bound_is_flagged_and_a_physical_o
 
 
 def test_the_trust_table_names_what_keeps_a_long_chain_from_converging():
-    _, verdict = assess_convergence(3000, np.array([50.0]), np.full(20, 0.13))
-    fit = SimpleNamespace(converged=False, verdict=verdict, flags=(), spin_periods={})
+    # The trust table reads the stored chain's numbers, as the verdict did (not the verdict's words).
+    tau, acceptance = np.array([50.0]), np.full(20, 0.13)
+    _, verdict = assess_convergence(3000, tau, acceptance)
+    fit = SimpleNamespace(
+        converged=False,
+        verdict=verdict,
+        flags=(),
+        spin_periods={},
+        n_steps=3400,
+        discard=400,
+        autocorr_time=tau,
+        acceptance_fraction=acceptance,
+    )
     reasons = assess(fit, SimpleNamespace(verdict="confident", best_period_s=9.5, uncertainty_s=0.001)).reasons
     assert reasons[0] == "chain not converged (mean acceptance 0.13 is outside 0.15-0.7)"

@@ -6,6 +6,7 @@ from __future__ import annotations
 import re
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 
 from rsodb.archive import Archive
@@ -18,15 +19,17 @@ from tests.conftest import REAL_FILES
 
 
 def fake_fit(converged=True, flags=(), curve=(9.8216, 9.8210, 9.8222), fixed=None, reduced_chi2=1.1):
+    """A stored fit's fields that the reports read: converged, 80 autocorrelation times long; or
+    not, 9.1 long at acceptance 0.07."""
     median, p16, p84 = curve
+    kept, tau, acceptance = (240, 3.0, 0.3) if converged else (91, 10.0, 0.07)
     return SimpleNamespace(
         converged=converged,
-        verdict=(
-            "converged: the kept chain is 80 autocorrelation times long. acceptance 0.3"
-            if converged
-            else "not converged: the kept chain is only 9.1 autocorrelation times long (50 wanted; tau = 3 steps); "
-            "mean acceptance 0.07 is outside 0.15-0.7"
-        ),
+        verdict="converged" if converged else "not converged",
+        n_steps=kept + 100,
+        discard=100,
+        autocorr_time=np.array([tau, tau / 2]),
+        acceptance_fraction=np.full(12, acceptance),
         flags=tuple(flags),
         reduced_chi2=reduced_chi2,
         names=("spin_period_s", "precession_angle_deg"),

@@ -56,12 +56,14 @@ from rsodb.fit.sampler import CONVERGED_TAUS, autocorr_time
 from rsodb.storage import attr_text, to_json
 
 __all__ = [
+    "ConvergenceCheck",
     "FitResult",
     "SCHEMA_VERSION",
     "MAX_STORED_SAMPLES",
     "assess_convergence",
     "best_and_draws",
     "chain_verdict",
+    "check_convergence",
     "first_kept_step",
     "prior_bound_flags",
 ]
@@ -138,8 +140,48 @@ def prior_bound_flags(space, samples: np.ndarray) -> list[str]:
     return flags
 
 
-def assess_convergence(n_kept: int, autocorr_time: np.ndarray, acceptance: np.ndarray) -> tuple[bool, str]:
-    """(converged, one-line verdict) from the kept chain length, tau per parameter and acceptance.
+@dataclass(frozen=True)
+class ConvergenceCheck:
+    """What the convergence verdict rests on (:func:`check_convergence`).
+
+    Attributes
+    ----------
+    lengths : float
+        Kept steps / the longest autocorrelation time.
+    tau : float
+        The longest autocorrelation time, steps.
+    mean_acceptance : float
+    stuck : int
+        Walkers that accepted under 5% of their proposals.
+    """
+
+    lengths: float
+    tau: float
+    mean_acceptance: float
+    stuck: int
+
+    @property
+    def too_short(self) -> bool:
+        return self.lengths < MIN_AUTOCORR_LENGTHS
+
+    @property
+    def mixing_problems(self) -> tuple[str, ...]:
+        """The walkers' problems other than the chain's length, in words."""
+        problems = []
+        low, high = ACCEPTANCE_RANGE
+        if not low <= self.mean_acceptance <= high:
+            problems.append(f"mean acceptance {self.mean_acceptance:.2f} is outside {low}-{high}")
+        if self.stuck:
+            problems.append(f"{self.stuck} walker(s) accepted under 5% of proposals (stuck)")
+        return tuple(problems)
+
+    @property
+    def converged(self) -> bool:
+        return not (self.too_short or self.mixing_problems)
+
+
+def check_convergence(n_kept: int, autocorr_time: np.ndarray, acceptance: np.ndarray) -> ConvergenceCheck:
+    """The kept chain's length in autocorrelation times and its walkers' acceptance.
 
     Parameters
     ----------
@@ -150,22 +192,25 @@ def assess_convergence(n_kept: int, autocorr_time: np.ndarray, acceptance: np.nd
     acceptance : (n_walkers,) float
         Acceptance fraction per walker.
     """
+    autocorr_time = np.asarray(autocorr_time, dtype=float)
+    acceptance = np.asarray(acceptance, dtype=float)
     tau = float(np.nanmax(autocorr_time)) if np.any(np.isfinite(autocorr_time)) else math.inf
     lengths = n_kept / tau if tau > 0 else math.inf
-    mean_acceptance = float(np.mean(acceptance))
-    stuck = int(np.sum(acceptance < 0.05))
-    problems = []
-    if lengths < MIN_AUTOCORR_LENGTHS:
-        problems.append(
+    return ConvergenceCheck(lengths, tau, float(np.mean(acceptance)), int(np.sum(acceptance < 0.05)))
+
+
+def assess_convergence(n_kept: int, autocorr_time: np.ndarray, acceptance: np.ndarray) -> tuple[bool, str]:
+    """(converged, one-line verdict) from the kept chain length, tau per parameter and acceptance
+    (:func:`check_convergence`)."""
+    check = check_convergence(n_kept, autocorr_time, acceptance)
+    lengths, tau = check.lengths, check.tau
+    problems = list(check.mixing_problems)
+    if check.too_short:
+        problems.insert(
+            0,
             f"the kept chain is only {lengths:.1f} autocorrelation times long "
-            f"({MIN_AUTOCORR_LENGTHS} wanted; tau = {tau:.0f} steps)"
+            f"({MIN_AUTOCORR_LENGTHS} wanted; tau = {tau:.0f} steps)",
         )
-    low, high = ACCEPTANCE_RANGE
-    if not low <= mean_acceptance <= high:
-        problems.append(f"mean acceptance {mean_acceptance:.2f} is outside {low}-{high}")
-    if stuck:
-        problems.append(f"{stuck} walker(s) accepted under 5% of proposals (stuck)")
-    if problems and lengths < MIN_AUTOCORR_LENGTHS:
         return False, "not converged: " + "; ".join(problems) + ". Run more steps (a rerun resumes the chain)."
     if problems:
         # Long enough, but the walkers move badly: more steps will not change that.
@@ -176,7 +221,7 @@ def assess_convergence(n_kept: int, autocorr_time: np.ndarray, acceptance: np.nd
         )
     return True, (
         f"converged: the kept chain is {lengths:.0f} autocorrelation times long (tau = {tau:.0f} steps), "
-        f"mean acceptance {mean_acceptance:.2f}"
+        f"mean acceptance {check.mean_acceptance:.2f}"
     )
 
 

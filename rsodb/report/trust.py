@@ -12,9 +12,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import math
-import re
 
-from rsodb.fit.result import MIN_AUTOCORR_LENGTHS
+from rsodb.fit.result import MIN_AUTOCORR_LENGTHS, check_convergence
 
 __all__ = ["Trust", "assess", "LEVELS", "AGREEMENT_SIGMA"]
 
@@ -58,7 +57,7 @@ def assess(fit, period=None, *, missing: str = "not fitted") -> Trust:
     level, reasons = "high", []
     if not fit.converged:
         level = _lower(level, "low")
-        reasons.append(_not_converged(fit.verdict))
+        reasons.append(_not_converged(fit))
     for flag in fit.flags:
         kind = flag.split(":")[0]
         if kind == "model misfit":
@@ -80,17 +79,13 @@ def assess(fit, period=None, *, missing: str = "not fitted") -> Trust:
     return Trust(level, tuple(reasons))
 
 
-def _not_converged(verdict: str) -> str:
-    """The convergence verdict's first problem, shortened for a table cell."""
-    lengths = re.search(r"only ([\d.]+) autocorrelation times long", verdict)
-    if lengths:
-        return f"chain not converged ({lengths.group(1)} autocorrelation times, {MIN_AUTOCORR_LENGTHS} wanted)"
-    # Long enough, but badly mixed (`assess_convergence`): its problems, not its length.
-    mixing = re.search(r"autocorrelation times long \(tau = \d+ steps\), but (.+?): walkers", verdict)
-    if mixing:
-        return f"chain not converged ({mixing.group(1)})"
-    first = verdict.split(". ")[0].split("; ")[0]
-    return "chain not converged (" + first.removeprefix("not converged: ").rstrip(".") + ")"
+def _not_converged(fit) -> str:
+    """The chain's first problem (`rsodb.fit.result.check_convergence`), short for a table cell."""
+    check = check_convergence(fit.n_steps - fit.discard, fit.autocorr_time, fit.acceptance_fraction)
+    if check.too_short:
+        return f"chain not converged ({check.lengths:.1f} autocorrelation times, {MIN_AUTOCORR_LENGTHS} wanted)"
+    # Long enough, but badly mixed: its problems, not its length.
+    return f"chain not converged ({'; '.join(check.mixing_problems)})"
 
 
 def _period_disagreement(fit, period) -> str:
