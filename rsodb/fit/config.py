@@ -19,7 +19,7 @@ from rsodb.fit.likelihood import LIKELIHOODS, OFFSET_MODES
 from rsodb.fit.model import ATTITUDES
 from rsodb.fit.parameters import Parameter, ParameterSpace, describe
 from rsodb.fit.priors import Uniform, prior_from_dict
-from rsodb.fit.sampler import SamplerSettings
+from rsodb.fit.sampler import SamplerSettings, whole_number
 from rsodb.fit.shapes import SHAPES, articulation_from_dict
 
 __all__ = ["FitConfig", "ModelConfig", "DataConfig", "LikelihoodConfig", "PERIODS_PRIOR", "read_toml"]
@@ -28,11 +28,6 @@ __all__ = ["FitConfig", "ModelConfig", "DataConfig", "LikelihoodConfig", "PERIOD
 PERIODS_PRIOR = MappingProxyType(
     {"from": "periods", "width": 0.01, "multiple": 1.0, "frame": "sidereal", "force": False}
 )
-
-
-def _whole(value) -> bool:
-    """A TOML integer (true and false are not numbers here, although Python's bool is an int)."""
-    return isinstance(value, int) and not isinstance(value, bool)
 
 
 def _non_negative(value) -> bool:
@@ -107,9 +102,9 @@ class ModelConfig:
             raise ValueError(f"[model] spin_axis={self.spin_axis!r} must be 'x', 'y' or 'z'")
         if self.renderer not in ("cached", "direct"):
             raise ValueError(f"[model] renderer={self.renderer!r} must be 'cached' or 'direct'")
-        if not (_whole(self.n_sub) and 0 <= self.n_sub <= 64):
+        if not (whole_number(self.n_sub) and 0 <= self.n_sub <= 64):
             raise ValueError(f"[model] n_sub={self.n_sub!r} must be a whole number 0..64 (0 chooses it)")
-        if not (_whole(self.grid_size) and (self.grid_size == 0 or 4 <= self.grid_size <= 256)):
+        if not (whole_number(self.grid_size) and (self.grid_size == 0 or 4 <= self.grid_size <= 256)):
             raise ValueError(
                 f"[model] grid_size={self.grid_size!r} must be 0 (chosen from the fit's planned work) "
                 "or a whole number 4..256"
@@ -156,9 +151,9 @@ class DataConfig:
             value = getattr(self, name)
             if not _non_negative(value):
                 raise ValueError(f"[data] {name}={value!r} must be a number >= 0")
-        if not (_whole(self.max_points) and (self.max_points == 0 or self.max_points >= 10)):
+        if not (whole_number(self.max_points) and (self.max_points == 0 or self.max_points >= 10)):
             raise ValueError(f"[data] max_points={self.max_points!r} must be 0 (no limit) or a whole number >= 10")
-        if not (_whole(self.windows) and self.windows >= 0):
+        if not (whole_number(self.windows) and self.windows >= 0):
             raise ValueError(f"[data] windows={self.windows!r} must be 0 (chosen) or a whole number >= 1")
 
 
@@ -236,14 +231,14 @@ class FitConfig:
     def __post_init__(self):
         if not isinstance(self.name, str) or not self.name:
             raise ValueError(f"fit name {self.name!r} must be a non-empty string")
-        if not (_whole(self.band_draws) and 0 <= self.band_draws <= 1000):
+        if not (whole_number(self.band_draws) and 0 <= self.band_draws <= 1000):
             raise ValueError(
                 f"band_draws={self.band_draws!r} must be a whole number 0..1000 (posterior draws of the model band)"
             )
         for name, spec in dict(self.parameters).items():
             _check_parameter_spec(name, spec)
         object.__setattr__(self, "parameters", MappingProxyType(dict(self.parameters)))
-        if self.discard is not None and not (_whole(self.discard) and 0 <= self.discard < self.sampler.n_steps):
+        if self.discard is not None and not (whole_number(self.discard) and 0 <= self.discard < self.sampler.n_steps):
             raise ValueError(f"discard={self.discard!r} must be a whole number below n_steps={self.sampler.n_steps}")
 
     def __reduce__(self):

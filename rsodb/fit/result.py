@@ -56,14 +56,14 @@ from rsodb.fit.sampler import CONVERGED_TAUS, autocorr_time
 from rsodb.storage import attr_text, to_json
 
 __all__ = [
-    "ConvergenceCheck",
+    "ChainHealth",
     "FitResult",
     "SCHEMA_VERSION",
     "MAX_STORED_SAMPLES",
     "assess_convergence",
     "best_and_draws",
     "chain_verdict",
-    "check_convergence",
+    "chain_health",
     "first_kept_step",
     "prior_bound_flags",
 ]
@@ -141,8 +141,8 @@ def prior_bound_flags(space, samples: np.ndarray) -> list[str]:
 
 
 @dataclass(frozen=True)
-class ConvergenceCheck:
-    """What the convergence verdict rests on (:func:`check_convergence`).
+class ChainHealth:
+    """What the convergence verdict rests on (:func:`chain_health`).
 
     Attributes
     ----------
@@ -180,7 +180,7 @@ class ConvergenceCheck:
         return not (self.too_short or self.mixing_problems)
 
 
-def check_convergence(n_kept: int, autocorr_time: np.ndarray, acceptance: np.ndarray) -> ConvergenceCheck:
+def chain_health(n_kept: int, autocorr_time: np.ndarray, acceptance: np.ndarray) -> ChainHealth:
     """The kept chain's length in autocorrelation times and its walkers' acceptance.
 
     Parameters
@@ -196,13 +196,13 @@ def check_convergence(n_kept: int, autocorr_time: np.ndarray, acceptance: np.nda
     acceptance = np.asarray(acceptance, dtype=float)
     tau = float(np.nanmax(autocorr_time)) if np.any(np.isfinite(autocorr_time)) else math.inf
     lengths = n_kept / tau if tau > 0 else math.inf
-    return ConvergenceCheck(lengths, tau, float(np.mean(acceptance)), int(np.sum(acceptance < 0.05)))
+    return ChainHealth(lengths, tau, float(np.mean(acceptance)), int(np.sum(acceptance < 0.05)))
 
 
 def assess_convergence(n_kept: int, autocorr_time: np.ndarray, acceptance: np.ndarray) -> tuple[bool, str]:
     """(converged, one-line verdict) from the kept chain length, tau per parameter and acceptance
-    (:func:`check_convergence`)."""
-    check = check_convergence(n_kept, autocorr_time, acceptance)
+    (:func:`chain_health`)."""
+    check = chain_health(n_kept, autocorr_time, acceptance)
     lengths, tau = check.lengths, check.tau
     problems = list(check.mixing_problems)
     if check.too_short:

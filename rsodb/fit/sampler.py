@@ -76,8 +76,10 @@ _STEADY = 0.1
 MAX_COUNT = 10**9
 
 
-def _whole(value) -> bool:
-    """An integer (true and false are not numbers here, although Python's bool is an int)."""
+def whole_number(value) -> bool:
+    """An integer (true and false are not numbers here, although Python's bool is an int: a TOML
+    boolean where a count belongs is a mistake, not 1). The fit configuration checks its counts
+    with it too."""
     return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
 
 
@@ -190,19 +192,19 @@ class SamplerSettings:
             "check_every",
         ):
             value = getattr(self, name)
-            if not _whole(value) or not 1 <= value <= MAX_COUNT:
+            if not whole_number(value) or not 1 <= value <= MAX_COUNT:
                 raise ValueError(f"sampler setting {name}={value!r} must be a whole number from 1 to {MAX_COUNT:.0e}")
         if self.moves not in MOVES:
             raise ValueError(f"sampler setting moves={self.moves!r} is not one of {', '.join(MOVES)}")
         if self.init not in INITIALISERS:
             raise ValueError(f"sampler setting init={self.init!r} is not one of {', '.join(INITIALISERS)}")
-        if not (_whole(self.processes) and self.processes >= 0):
+        if not (whole_number(self.processes) and self.processes >= 0):
             raise ValueError(
                 f"sampler setting processes={self.processes!r} must be 0 (all cores) or a positive integer"
             )
-        if not (_whole(self.seed) and self.seed >= 0):
+        if not (whole_number(self.seed) and self.seed >= 0):
             raise ValueError(f"sampler setting seed={self.seed!r} must be a non-negative integer")
-        if not (_whole(self.settle_evals) and 0 <= self.settle_evals <= MAX_COUNT):
+        if not (whole_number(self.settle_evals) and 0 <= self.settle_evals <= MAX_COUNT):
             raise ValueError(
                 f"sampler setting settle_evals={self.settle_evals!r} must be a whole number from 0 (no "
                 f"refinement) to {MAX_COUNT:.0e}"

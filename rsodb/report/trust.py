@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 import math
 
-from rsodb.fit.result import MIN_AUTOCORR_LENGTHS, check_convergence
+from rsodb.fit.result import MIN_AUTOCORR_LENGTHS, chain_health
 
 __all__ = ["Trust", "assess", "LEVELS", "AGREEMENT_SIGMA"]
 
@@ -80,8 +80,8 @@ def assess(fit, period=None, *, missing: str = "not fitted") -> Trust:
 
 
 def _not_converged(fit) -> str:
-    """The chain's first problem (`rsodb.fit.result.check_convergence`), short for a table cell."""
-    check = check_convergence(fit.n_steps - fit.discard, fit.autocorr_time, fit.acceptance_fraction)
+    """The chain's first problem (`rsodb.fit.result.chain_health`), short for a table cell."""
+    check = chain_health(fit.n_steps - fit.discard, fit.autocorr_time, fit.acceptance_fraction)
     if check.too_short:
         return f"chain not converged ({check.lengths:.1f} autocorrelation times, {MIN_AUTOCORR_LENGTHS} wanted)"
     # Long enough, but badly mixed: its problems, not its length.
