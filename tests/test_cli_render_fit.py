@@ -107,7 +107,13 @@ init = "prior"
     summary = json.loads(capsys.readouterr().out)
     observed = archive.get(pass_id)
     assert summary["n_samples"] == len(observed) and summary["n_window"] == np.sum(observed.t_s <= 20.0)
-    assert set(summary["spin_periods"]["conventions"]) == {"parameter", "orbit_frame", "inertial", "light_curve"}
+    assert set(summary["spin_periods"]["conventions"]) == {
+        "parameter",
+        "orbit_frame",
+        "inertial",
+        "light_curve",
+        "periodogram",
+    }
     assert plot.stat().st_size > 10_000 and len(list(frames.glob("*.png"))) == 2
     assert summary["glint_map"] == str(glints) and glints.stat().st_size > 10_000
     from PIL import Image

@@ -9,13 +9,17 @@
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
 from ingest import read_file
-from rsodb.fit.conventions import rates_hz
+from rsodb.fit.conventions import periodogram_period, rates_hz
 from rsodb.fit.curves import geometry_at
 from rsodb.fit.model import ConvexFacets, SpinStateModel
+from rsodb.periods.lightcurve import LightCurve
+from rsodb.periods.search import find_period
 from rsodb.periods.synodic import azimuth_rate_rad_s, phase_angle_bisector
 from tests.conftest import TOPEX_PHV
 
@@ -73,3 +77,27 @@ def test_inertial_spin_conventions(grid, tilt):
     # The bisector moves by ~0.1-0.3 deg/s during a pass: a per-cent shift, found to 1e-9.
     assert rates["light_curve"] == pytest.approx(1 / 9.86 - omega / (2 * np.pi), rel=1e-9)
     assert abs(rates["light_curve"] * 9.86 - 1) > 1e-3
+
+
+def test_the_periodogram_convention_is_the_period_search_on_the_models_own_curve(grid):
+    # A pass whose magnitudes are the model's own at the TOPEX pass's samples: the convention
+    # must find exactly what the period search finds in that pass (same samples, times and
+    # exposure). Both differ from the bisector's mean rate (9.4798 s): the maxima of a
+    # Lambertian box follow the Sun and the observer, not their bisector, and drift otherwise
+    # (the period search finds 9.4719 s, outside the bisector's own 9.4778-9.4827 s over the pass).
+    observed, geometry = grid
+    # Faces of unequal reflectance about the spin axis: the light curve repeats once a turn.
+    box = ConvexFacets.box()
+    lopsided = ConvexFacets(box.normals, box.areas_m2, [0.8, 0.4, 0.2, 0.1, 0.2, 0.2])
+    model = SpinStateModel(geometry, lopsided, "inertial", {"spin_axis": "z"}, (), "V", 1000.0)
+    values = {"spin_period_s": 9.5, "spin_phase_deg": 30.0, "pole_ra_deg": 147.0, "pole_dec_deg": -59.0}
+    on_samples = model.on(geometry_at(observed, observed.time_utc, observed.exposure_s, 1, None))
+    synthetic = observed.replace(mag_corrected=on_samples.magnitudes(values))
+    searched = find_period(LightCurve.from_pass(synthetic)).best_period_s
+    space = SimpleNamespace(values=lambda theta: values)
+    convention = periodogram_period(model, space, np.zeros((3, 4)), synthetic, 1, 9.0)
+    assert convention["median"] == pytest.approx(searched, rel=1e-12)
+    assert convention["p16"] == convention["p84"] == convention["median"]
+    mean_rate = 1.0 / rates_hz(model, values, geometry, "z")["light_curve"]
+    assert mean_rate == pytest.approx(9.4798, abs=1e-4)
+    assert abs(searched - mean_rate) > 0.005

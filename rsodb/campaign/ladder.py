@@ -24,6 +24,7 @@ import numpy as np
 from raycast.geometry.pass_geometry import orbit_problem
 from rsodb.campaign.fit_campaign import run_campaigns
 from rsodb.fit.config import PERIODS_PRIOR, FitConfig, read_toml
+from rsodb.fit.conventions import comparable_convention
 from rsodb.fit.model import ATTITUDES
 from rsodb.fit.prediction import predict_fit
 from rsodb.fit.result import FitResult
@@ -365,7 +366,7 @@ def _score(rung: Rung, fit_name: str, result: FitResult, observed) -> tuple[Rung
         result.reduced_chi2,
         bool(result.converged),
         result.verdict,
-        float(conventions.get("light_curve", {}).get("median", math.nan)),
+        float(conventions.get(comparable_convention(conventions), {}).get("median", math.nan)),
         float(result.elapsed_s),
     )
     return score, residuals[heldout]

@@ -15,7 +15,7 @@ import textwrap
 
 import numpy as np
 
-from rsodb.fit.conventions import azimuth_elevation
+from rsodb.fit.conventions import azimuth_elevation, comparable_convention
 from rsodb.fit.likelihood import NormalisedLikelihood
 from rsodb.fit.sampler import read_chain
 
@@ -207,11 +207,13 @@ def lightcurve_figure(result, path=None, mag_label: str = "magnitude"):
 
 
 def fold_period_s(result) -> float | None:
-    """The period to fold a fit's pass at: its light-curve period (posterior median), else the
-    fitted spin period; None when the fit has neither."""
+    """The period to fold a fit's pass at: its period as the period search sees it, else its
+    light-curve period (posterior medians, `rsodb.fit.conventions.comparable_convention`), else
+    the fitted spin period; None when the fit has none."""
     conventions = dict(result.spin_periods).get("conventions", {})
-    if "light_curve" in conventions:
-        return float(conventions["light_curve"]["median"])
+    name = comparable_convention(conventions)
+    if name is not None:
+        return float(conventions[name]["median"])
     if "spin_period_s" in result.names:
         return float(result.values("median")["spin_period_s"])
     return None

@@ -49,6 +49,7 @@ from typing import Any
 
 import numpy as np
 
+from rsodb.fit.conventions import comparable_convention
 from rsodb.fit.curves import ModelCurve, PassCurve
 from rsodb.fit.likelihood import flux_error_of, jitter_of
 from rsodb.fit.parameters import ParameterSpace, describe
@@ -432,8 +433,8 @@ class FitResult:
         if self.spin_periods.get("periodogram_period_s") is not None:
             lines.append(
                 f"  periodogram  {self.spin_periods['periodogram_period_s']:.6g} s "
-                f"(+-{self.spin_periods['periodogram_uncertainty_s']:.2g}): the stored period, "
-                "to compare with light_curve"
+                f"(+-{self.spin_periods['periodogram_uncertainty_s']:.2g}): the stored period search's, "
+                f"to compare with {comparable_convention(conventions)}"
             )
         return lines
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from raycast.geometry.pass_geometry import choose_n_sub
 from rsodb.fit.config import FitConfig
-from rsodb.fit.conventions import spin_periods
+from rsodb.fit.conventions import PERIODOGRAM_DRAWS, periodogram_period, spin_periods
 from rsodb.fit.curves import geometry_at, pass_curves
 from rsodb.fit.likelihood import make_likelihood
 from rsodb.fit.model import SpinStateModel
@@ -259,6 +259,18 @@ class FitProblem:
             config.model.spin_axis,
             periods,
         )
+        # What the stored period search would find in the model's own light curve: the like-with-like comparison.
+        periodogram = periodogram_period(
+            self.posterior.model,
+            space,
+            draws[:PERIODOGRAM_DRAWS],
+            self.observed,
+            self.curve_n_sub(),
+            fastest,
+            getattr(periods, "settings", None),
+        )
+        if periodogram is not None:
+            periods_record["conventions"]["periodogram"] = periodogram
         record = dict(config.to_dict(), shape=self.shape)
         return FitResult.from_run(
             run,
