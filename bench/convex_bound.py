@@ -1,0 +1,199 @@
+"""How far a free convex body gets on a real pass: a bound on what any convex model can fit.
+
+A convex body of many flat facets (normals spread evenly over the sphere, each with a Lambertian
+term and GGX lobes of a few roughnesses, the project's own BRDFs) has a light curve linear in its
+facets' reflecting areas. For a trial attitude the areas that fit best are found by non-negative
+least squares on the relative flux (every sample weighted as in magnitudes), and the attitude by
+differential evolution on the residual RMS in magnitudes. No facet shadows another (the body is
+convex), so what this leaves is what no convex body with that attitude family can fit: the part
+of the misfit that needs shadows or another attitude. With ``--holdout`` the attitude and the
+areas are fitted on the first part of the pass and scored on the rest, as the model ladder does.
+
+    python bench/convex_bound.py                          # the real TOPEX pass, inertial spin, 100 facets
+    python bench/convex_bound.py --facets 50,100 --attitudes inertial,precessing
+
+Prints and records (docs/benchmarks.md) the RMS over every sample and the held-out RMS.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+import sys
+import time
+
+import numpy as np
+from scipy.optimize import differential_evolution, nnls
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+from bench.record import command, figure, record, today  # noqa: E402
+
+TOPEX_PHV = ROOT.parent / "shared" / "data" / "observations" / "result_22076_20240730_UT212240.phV"
+# Attitude parameters searched per family, and their ranges (the spin period's is set from the
+# period search: the fit's default prior of +-1% around the periodogram's period).
+RANGES = {
+    "inertial": {"spin_phase_deg": (0.0, 360.0), "pole_ra_deg": (0.0, 360.0), "pole_dec_deg": (-90.0, 90.0)},
+    "precessing": {
+        "spin_phase_deg": (0.0, 360.0),
+        "precession_period_s": (50.0, 5000.0),
+        "precession_phase_deg": (0.0, 360.0),
+        "precession_angle_deg": (0.0, 90.0),
+    },
+}
+# A sample the model misses by more than this counts as this much (a dark model sample is +inf).
+CLIP_MAG = 5.0
+
+
+def fibonacci_sphere(n: int) -> np.ndarray:
+    """(n, 3) unit vectors spread evenly over the sphere."""
+    i = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * i / n
+    azimuth = math.pi * (1.0 + math.sqrt(5.0)) * i
+    r = np.sqrt(1.0 - z * z)
+    return np.column_stack([r * np.cos(azimuth), r * np.sin(azimuth), z])
+
+
+class ConvexBound:
+    """A pass, an attitude family and a sphere of facets: the best non-negative facet areas for
+    any attitude (:meth:`fit_areas`), and the residual RMS they leave (:meth:`rms`)."""
+
+    def __init__(self, observed, attitude: str, normals: np.ndarray, roughnesses=(0.08, 0.3)):
+        from raycast.renderer.brdf import GGX, Lambertian
+        from rsodb.fit.curves import geometry_at
+        from rsodb.fit.model import SpinStateModel
+
+        self.observed = observed
+        self.mag = np.asarray(observed.best_mag, dtype=float)
+        self.usable = np.isfinite(self.mag) & np.asarray(observed.valid, bool)
+        geometry = geometry_at(observed, observed.time_utc, observed.exposure_s, 1, None)
+        # The attitude's frames only: the brightness is this class's own.
+        self.model = SpinStateModel(geometry, None, attitude)
+        self.geometry = geometry
+        self.normals = normals
+        self.brdfs = [Lambertian(1.0)] + [GGX(1.0, r) for r in roughnesses]
+
+    def design(self, values) -> np.ndarray:
+        """(samples, facets x BRDFs) I/E of unit areas (Earth shadow applied)."""
+        body = self.geometry.body_frame(self.model.attitude_model(values))
+        sun, obs = body.sun_body[:, 0], body.obs_body[:, 0]
+        cos_i, cos_o = sun @ self.normals.T, obs @ self.normals.T
+        cos_io = np.sum(sun * obs, axis=1)[:, None]
+        seen = np.maximum(cos_o, 0.0)
+        columns = [brdf.shade(cos_i, cos_o, cos_io) * seen for brdf in self.brdfs]
+        return np.concatenate(columns, axis=1) * body.sunlit[:, :1]
+
+    def fit_areas(self, design: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """Non-negative areas minimising the relative flux residuals over `rows` (bool)."""
+        reference = np.median(self.mag[rows])
+        flux = 10.0 ** (-0.4 * (self.mag - reference))
+        areas, _ = nnls(design[rows] / flux[rows, None], np.ones(int(rows.sum())), maxiter=20 * design.shape[1])
+        return areas * 10.0 ** (-0.4 * reference)
+
+    def model_mag(self, design: np.ndarray, areas: np.ndarray) -> np.ndarray:
+        with np.errstate(divide="ignore"):
+            return -2.5 * np.log10(design @ areas)
+
+    def rms(self, values, fit_rows: np.ndarray, score_rows: np.ndarray) -> float:
+        """Residual RMS (mag) over `score_rows` with the areas fitted on `fit_rows`."""
+        design = self.design(values)
+        residual = self.model_mag(design, self.fit_areas(design, fit_rows)) - self.mag
+        return float(np.sqrt(np.mean(np.minimum(residual[score_rows] ** 2, CLIP_MAG**2))))
+
+
+def search(bound: ConvexBound, names, ranges, fit_rows, seed: int, maxiter: int):
+    """(best values, their RMS on `fit_rows`, evaluations) of differential evolution over the attitude."""
+
+    def cost(x):
+        return bound.rms(dict(zip(names, x)), fit_rows, fit_rows)
+
+    found = differential_evolution(cost, ranges, popsize=12, maxiter=maxiter, seed=seed, polish=False, tol=1e-4)
+    return dict(zip(names, found.x)), float(found.fun), int(found.nfev)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--pass-file", type=Path, default=TOPEX_PHV, help="observation file (default: the real TOPEX pass)"
+    )
+    parser.add_argument("--facets", default="100", help="facet counts, joined by commas (default 100)")
+    parser.add_argument("--attitudes", default="inertial", help="inertial and/or precessing, joined by commas")
+    parser.add_argument("--holdout", type=float, default=0.3, help="share of the pass held out at its end (0: none)")
+    parser.add_argument("--maxiter", type=int, default=60, help="differential-evolution generations")
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--no-record", action="store_true", help="print only")
+    args = parser.parse_args(argv)
+    from ingest import read_file
+    from rsodb.periods.analysis import analyse_pass
+
+    observed = read_file(args.pass_file)[0]
+    period = analyse_pass(observed, geometry=False).best_period_s
+    if not math.isfinite(period):
+        raise SystemExit(f"{args.pass_file}: the period search found no period to centre the spin period's range on")
+    rows = []
+    for attitude in args.attitudes.split(","):
+        if attitude not in RANGES:
+            raise SystemExit(f"--attitudes: {attitude!r} is not one of {', '.join(RANGES)}")
+        for n in (int(v) for v in args.facets.split(",")):
+            bound = ConvexBound(observed, attitude, fibonacci_sphere(n))
+            names = ["spin_period_s", *RANGES[attitude]]
+            ranges = [(0.99 * period, 1.01 * period), *RANGES[attitude].values()]
+            started = time.perf_counter()
+            values, whole, evaluations = search(bound, names, ranges, bound.usable, args.seed, args.maxiter)
+            row = {"attitude": attitude, "facets": n, "whole_rms": whole, "whole": values, "evaluations": evaluations}
+            if args.holdout > 0:
+                cut = np.arange(len(observed)) < round((1.0 - args.holdout) * len(observed))
+                train, held = bound.usable & cut, bound.usable & ~cut
+                values, row["train_rms"], _ = search(bound, names, ranges, train, args.seed, args.maxiter)
+                row["heldout_rms"] = bound.rms(values, train, held)
+                row["train"] = values
+            row["seconds"] = time.perf_counter() - started
+            rows.append(row)
+            print(
+                f"{attitude}, {n} facets x {len(bound.brdfs)} BRDFs: whole pass {whole:.3f} mag RMS"
+                + (
+                    f"; fitted on the first {1 - args.holdout:.0%}: {row['train_rms']:.3f}, held out {row['heldout_rms']:.3f}"
+                    if args.holdout > 0
+                    else ""
+                )
+                + f" ({row['seconds']:.0f} s)"
+            )
+    if args.no_record:
+        return 0
+    lines = [
+        f"| {r['attitude']} | {r['facets']} | {r['whole_rms']:.3f} | "
+        + (f"{r['train_rms']:.3f} | {r['heldout_rms']:.3f}" if "train_rms" in r else "- | -")
+        + f" | {', '.join(f'{k} {v:.4g}' for k, v in r['whole'].items())} |"
+        for r in rows
+    ]
+    section = (
+        f"""
+## A free convex body on a real pass ({today()}, bench/convex_bound.py)
+
+{observed.name} ({observed.norad}), {args.pass_file.name}: {int(np.sum(bound.usable))} samples. Facet normals
+spread evenly over the sphere, each with a Lambertian term and GGX lobes of roughness 0.08 and 0.3 (the
+project's BRDFs), their areas non-negative and fitted by least squares on the relative flux for each trial
+attitude; the attitude by differential evolution (spin period within +-1% of the period search's
+{period:.4f} s). No facet shadows another: what is left is what no convex body spinning this way fits.
+Held out: the last {args.holdout:.0%} of the pass, the areas and attitude fitted on the rest.
+
+| attitude | facets | RMS over every sample (mag) | fitted part (mag) | held out (mag) | whole-pass attitude |
+|---|---|---|---|---|---|
+"""
+        + "\n".join(lines)
+        + "\n"
+    )
+    figures = [
+        figure(f"{r['attitude']}, {r['facets']} facets, whole pass", f"{r['whole_rms']:.3f} mag RMS") for r in rows
+    ] + [
+        figure(f"{r['attitude']}, {r['facets']} facets, held out", f"{r['heldout_rms']:.3f} mag RMS")
+        for r in rows
+        if "heldout_rms" in r
+    ]
+    record("convex_bound", command("convex_bound.py", argv), figures, section)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
