@@ -92,14 +92,9 @@ def test_the_cache_grid_follows_the_length_of_the_fit(tmp_path, template):
     assert len(list((tmp_path / "shapes").glob("*.pkl"))) == 3
 
 
-def test_the_element_size_reaches_the_cache_and_its_key(tmp_path, template):
-    # [model] element_size_m sets the cache's largest element (a finer cut: more elements) and is
-    # part of the stored cache's key; 0 keeps the renderer's default and the default key.
-    obj, materials = write_box(tmp_path)
-    # A plate above the box shades its top, so the top is cut into elements (a convex body's
-    # sides are all exposed and never cut).
-    plate = ["o plate", "usemtl paint", "v -0.5 -0.5 1.5", "v 0.5 -0.5 1.5", "v 0.5 0.5 1.5", "v -0.5 0.5 1.5"]
-    obj.write_text(obj.read_text() + "\n".join(plate + ["f 9 10 11 12"]) + "\n")
+def cache_settings_checker(tmp_path, template, obj, materials):
+    """``cache_of(model)``: the cache a fit of the box mesh with these [model] settings gets,
+    all stored in one shape store (tmp_path / "shapes")."""
     store = ShapeStore(tmp_path / "shapes")
 
     def cache_of(model):
@@ -108,6 +103,18 @@ def test_the_element_size_reaches_the_cache_and_its_key(tmp_path, template):
         problem = FitProblem.build(template, FitConfig.from_dict({"model": model, "parameters": PRIOR}), store=store)
         return problem.posterior.model.brightness
 
+    return cache_of
+
+
+def test_the_element_size_reaches_the_cache_and_its_key(tmp_path, template):
+    # [model] element_size_m sets the cache's largest element (a finer cut: more elements) and is
+    # part of the stored cache's key; 0 keeps the renderer's default and the default key.
+    obj, materials = write_box(tmp_path)
+    # A plate above the box shades its top, so the top is cut into elements (a convex body's
+    # sides are all exposed and never cut).
+    plate = ["o plate", "usemtl paint", "v -0.5 -0.5 1.5", "v 0.5 -0.5 1.5", "v 0.5 0.5 1.5", "v -0.5 0.5 1.5"]
+    obj.write_text(obj.read_text() + "\n".join(plate + ["f 9 10 11 12"]) + "\n")
+    cache_of = cache_settings_checker(tmp_path, template, obj, materials)
     default, same, finer = cache_of({}), cache_of({"element_size_m": 0.0}), cache_of({"element_size_m": 0.02})
     assert same is default
     assert finer.element_size_m == 0.02 and default.element_size_m > 0.04
@@ -119,13 +126,7 @@ def test_the_normal_bins_reach_the_cache_and_its_key(tmp_path, template):
     # [model] normal_bins_per_step sets the cache's shading classes per normal step (1: fewer
     # classes) and is part of the stored cache's key; 0 keeps the renderer's default and key.
     obj, materials = write_box(tmp_path)
-    store = ShapeStore(tmp_path / "shapes")
-
-    def cache_of(model):
-        model = {"mesh": str(obj), "materials": str(materials), "n_sub": 1, "grid_size": 8, **model}
-        problem = FitProblem.build(template, FitConfig.from_dict({"model": model, "parameters": PRIOR}), store=store)
-        return problem.posterior.model.brightness
-
+    cache_of = cache_settings_checker(tmp_path, template, obj, materials)
     default, same, coarse = cache_of({}), cache_of({"normal_bins_per_step": 0}), cache_of({"normal_bins_per_step": 1})
     assert same is default
     assert (default.normal_bins_per_step, coarse.normal_bins_per_step) == (3.0, 1.0)
