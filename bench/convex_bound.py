@@ -175,7 +175,8 @@ def main(argv=None) -> int:
 spread evenly over the sphere, each with a Lambertian term and GGX lobes of roughness 0.08 and 0.3 (the
 project's BRDFs), their areas non-negative and fitted by least squares on the relative flux for each trial
 attitude; the attitude by differential evolution (spin period within +-1% of the period search's
-{period:.4f} s). No facet shadows another: what is left is what no convex body spinning this way fits.
+{period:.4f} s). No facet shadows another, so the fit is the search's best: an upper bound on what the best
+convex body spinning this way leaves (differential evolution, 12 x parameters x {args.maxiter} generations).
 Held out: the last {args.holdout:.0%} of the pass, the areas and attitude fitted on the rest.
 
 | attitude | facets | RMS over every sample (mag) | fitted part (mag) | held out (mag) | whole-pass attitude |
