@@ -73,6 +73,14 @@ def test_each_doubt_lowers_the_trust_and_says_why(fit, period, level, reason):
     assert any(reason in r for r in trust.reasons), trust.reasons
 
 
+def test_a_fit_judged_by_an_older_rule_keeps_its_own_reason():
+    # Stored as not converged, but healthy by today's numbers (the rule changed since): the
+    # table quotes the stored verdict rather than an empty reason.
+    fit = fake_fit()
+    fit.converged, fit.verdict = False, "not converged: tau still drifting. Run more steps."
+    assert assess(fit, fake_period()).reasons == ("chain not converged (tau still drifting)",)
+
+
 def test_the_worst_doubt_sets_the_level():
     trust = assess(fake_fit(converged=False, flags=("stuck walkers: 3",)), fake_period("ambiguous harmonic"))
     assert trust.level == "low" and len(trust.reasons) == 3

@@ -24,7 +24,7 @@ period?", draws them):
     the stored period is, so the two compare like with like. It differs from ``light_curve``
     where the bisector turns unevenly over the pass: a periodogram weighs each part of the pass
     by the signal it holds, the mean rate each second alike (on the real TOPEX pass of
-    2024-07-30, 9.4832 s against 9.4842 s). It needs no spin axis, so a tumbling body has it too.
+    2024-07-30, 9.4830 s against 9.4842 s for the ladder's topex-inertial rung). It needs no spin axis, so a tumbling body has it too.
 
 Each is computed from the fitted attitude itself, not from a formula per family: on a time grid
 over the fitted window (`STEPS_PER_CYCLE` steps per cycle of the fastest spin) the rotation
@@ -50,6 +50,7 @@ from rsodb.periods.search import find_period
 __all__ = [
     "CONVENTIONS",
     "PERIODOGRAM_DRAWS",
+    "comparable_convention",
     "periodogram_period",
     "spin_periods",
     "rates_hz",

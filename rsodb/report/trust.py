@@ -86,7 +86,10 @@ def _not_converged(fit) -> str:
     if check.too_short:
         return f"chain not converged ({check.lengths:.1f} autocorrelation times, {MIN_AUTOCORR_LENGTHS} wanted)"
     # Long enough, but badly mixed: its problems, not its length.
-    return f"chain not converged ({'; '.join(check.mixing_problems)})"
+    if check.mixing_problems:
+        return f"chain not converged ({'; '.join(check.mixing_problems)})"
+    # Judged by another rule than today's (a fit stored before the rule changed): its own words.
+    return "chain not converged (" + fit.verdict.split(". ")[0].removeprefix("not converged: ").rstrip(".") + ")"
 
 
 def _period_disagreement(fit, period) -> str:
