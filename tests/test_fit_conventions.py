@@ -101,3 +101,21 @@ def test_the_periodogram_convention_is_the_period_search_on_the_models_own_curve
     mean_rate = 1.0 / rates_hz(model, values, geometry, "z")["light_curve"]
     assert mean_rate == pytest.approx(9.4798, abs=1e-4)
     assert abs(searched - mean_rate) > 0.005
+
+
+def test_the_periodogram_convention_brings_the_draws_to_one_harmonic(grid, monkeypatch):
+    # On a short pass the search finds P in some draws' model curves and P/2 in others: the
+    # summary is of the harmonic most draws found, the others doubled or halved to it, not a
+    # median between the two.
+    observed, geometry = grid
+    model = SpinStateModel(geometry, ConvexFacets.box(), "inertial", {"spin_axis": "z"}, (), "V", 1000.0)
+    values = {"spin_period_s": 9.5, "spin_phase_deg": 30.0, "pole_ra_deg": 147.0, "pole_dec_deg": -59.0}
+    found = iter([39.6, 19.81, 39.5, 39.7, 19.85])
+    monkeypatch.setattr(
+        "rsodb.fit.conventions.find_period", lambda curve, settings=None: SimpleNamespace(best_period_s=next(found))
+    )
+    space = SimpleNamespace(values=lambda theta: values)
+    summary = periodogram_period(model, space, np.zeros((5, 4)), observed, 1, 9.0)
+    assert summary["median"] == pytest.approx(39.62)
+    assert 39.5 <= summary["p16"] < summary["p84"] <= 39.7
+    assert summary["share"] == pytest.approx(0.6)

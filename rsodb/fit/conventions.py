@@ -195,7 +195,10 @@ def periodogram_period(
     Returns
     -------
     dict or None
-        ``{median, p16, p84}`` over the draws whose curve gave a period; None when none did.
+        ``{median, p16, p84, share}`` over the draws whose curve gave a period; None when none
+        did. A short pass's model curve can repeat almost as well at half the turn, so the
+        search finds P in some draws and P/2 in others: every draw is brought to the multiple
+        (a power of 2 apart) that most draws found, and ``share`` says how many found it.
     """
     data = LightCurve.from_pass(observed)
     times = observed.start_utc + (data.t_s * 1e9).round().astype("int64").astype("timedelta64[ns]")
@@ -211,7 +214,14 @@ def periodogram_period(
         period = find_period(curve, settings=settings).best_period_s
         if math.isfinite(period):
             found.append(period)
-    return _summary(np.array(found)) if found else None
+    if not found:
+        return None
+    found = np.array(found)
+    # Harmonics a power of 2 apart (the search's P, P/2, 2P), counted from the shortest found.
+    octave = np.round(np.log2(found / found.min())).astype(int)
+    values, counts = np.unique(octave, return_counts=True)
+    modal = values[np.argmax(counts)]
+    return _summary(found * 2.0 ** (modal - octave)) | {"share": float(counts.max() / found.size)}
 
 
 def _summary(periods: np.ndarray) -> dict:
