@@ -64,7 +64,6 @@ class ConvexBound:
         from rsodb.fit.curves import geometry_at
         from rsodb.fit.model import SpinStateModel
 
-        self.observed = observed
         self.mag = np.asarray(observed.best_mag, dtype=float)
         self.usable = np.isfinite(self.mag) & np.asarray(observed.valid, bool)
         geometry = geometry_at(observed, observed.time_utc, observed.exposure_s, 1, None)

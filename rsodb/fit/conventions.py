@@ -51,6 +51,7 @@ __all__ = [
     "CONVENTIONS",
     "PERIODOGRAM_DRAWS",
     "comparable_convention",
+    "fit_conventions",
     "periodogram_period",
     "spin_periods",
     "rates_hz",
@@ -161,6 +162,12 @@ def rates_hz(model, values, geometry, axis: str) -> dict[str, float]:
     light = -float(azimuth[-1] - azimuth[0]) / span
     turn = 2 * math.pi
     return {"orbit_frame": orbit / turn, "inertial": inertial / turn, "light_curve": light / turn}
+
+
+def fit_conventions(fit) -> dict:
+    """The spin period's conventions a fit result stored (``{name: {median, p16, p84, ...}}``),
+    {} for a fit without them."""
+    return dict(getattr(fit, "spin_periods", {}) or {}).get("conventions", {})
 
 
 def comparable_convention(conventions) -> str | None:

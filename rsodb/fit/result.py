@@ -176,10 +176,6 @@ class ChainHealth:
             problems.append(f"{self.stuck} walker(s) accepted under 5% of proposals (stuck)")
         return tuple(problems)
 
-    @property
-    def converged(self) -> bool:
-        return not (self.too_short or self.mixing_problems)
-
 
 def chain_health(n_kept: int, autocorr_time: np.ndarray, acceptance: np.ndarray) -> ChainHealth:
     """The kept chain's length in autocorrelation times and its walkers' acceptance.

@@ -5,7 +5,7 @@ from __future__ import annotations
 import html
 import math
 
-from rsodb.fit.conventions import comparable_convention
+from rsodb.fit.conventions import comparable_convention, fit_conventions
 from rsodb.fit.result import FitResult
 from rsodb.periods.result import PeriodResult
 from rsodb.report.html import Document, Link, Paragraph, Raw, Table, anchor
@@ -84,8 +84,7 @@ def build_index(archive, written, fit_name: str | None, missing=None) -> Documen
                 spin = interval(fit.median[j], fit.p16[j], fit.p84[j], digits=6)
             elif "spin_period_s" in fit.space.fixed:
                 spin = f"{fit.space.fixed['spin_period_s']:.6g} (fixed)"
-            conventions = dict(getattr(fit, "spin_periods", {}) or {}).get("conventions", {})
-            curve = convention_interval(fit, comparable_convention(conventions) or "light_curve")
+            curve = convention_interval(fit, comparable_convention(fit_conventions(fit)))
             axis = axis_text(fit)
         why.extend(trust.reasons)
         page = pages.get(("fits", row.norad)) or pages.get(("periods", row.norad))

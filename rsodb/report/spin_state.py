@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 
+from rsodb.fit.conventions import fit_conventions
 from rsodb.fit.parameters import describe
 
 __all__ = ["interval", "spin_state_rows", "axis_text", "convention_interval"]
@@ -31,8 +32,9 @@ def interval(median: float, p16: float, p84: float, digits: int = 4) -> str:
 
 
 def convention_interval(fit, convention: str) -> str:
-    """The spin period in one convention (`rsodb.fit.conventions`) as an interval, or '-'."""
-    value = dict(getattr(fit, "spin_periods", {}) or {}).get("conventions", {}).get(convention)
+    """The spin period in one convention (`rsodb.fit.conventions`) as an interval, or '-' (also
+    for ``convention=None``)."""
+    value = fit_conventions(fit).get(convention)
     return "-" if value is None else interval(value["median"], value["p16"], value["p84"], digits=6)
 
 

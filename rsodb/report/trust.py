@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 import math
 
-from rsodb.fit.conventions import comparable_convention
+from rsodb.fit.conventions import comparable_convention, fit_conventions
 from rsodb.fit.result import MIN_AUTOCORR_LENGTHS, chain_health
 
 __all__ = ["Trust", "assess", "LEVELS", "AGREEMENT_SIGMA"]
@@ -94,7 +94,7 @@ def _not_converged(fit) -> str:
 
 def _period_disagreement(fit, period) -> str:
     """A reason when the fit's light-curve period misses the periodogram's, else ''."""
-    conventions = dict(getattr(fit, "spin_periods", {}) or {}).get("conventions", {})
+    conventions = fit_conventions(fit)
     curve = conventions.get(comparable_convention(conventions))
     if curve is None or period is None or not math.isfinite(period.best_period_s):
         return ""
