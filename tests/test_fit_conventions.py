@@ -119,3 +119,22 @@ def test_the_periodogram_convention_brings_the_draws_to_one_harmonic(grid, monke
     assert summary["median"] == pytest.approx(39.62)
     assert 39.5 <= summary["p16"] < summary["p84"] <= 39.7
     assert summary["share"] == pytest.approx(0.6)
+
+
+def test_the_periodogram_convention_leaves_a_third_harmonic_as_found(grid, monkeypatch):
+    # A draw whose curve the search reads at a third of the period is no power of 2 from the
+    # others: doubling or quadrupling it would invent 26.4 s or 52.8 s. It stays at 13.2 s, where
+    # it widens the interval, and does not count in the share.
+    observed, geometry = grid
+    model = SpinStateModel(geometry, ConvexFacets.box(), "inertial", {"spin_axis": "z"}, (), "V", 1000.0)
+    values = {"spin_period_s": 9.5, "spin_phase_deg": 30.0, "pole_ra_deg": 147.0, "pole_dec_deg": -59.0}
+    found = iter([13.2, 39.6, 19.81, 39.5, 39.7, 19.85])
+    monkeypatch.setattr(
+        "rsodb.fit.conventions.find_period", lambda curve, settings=None: SimpleNamespace(best_period_s=next(found))
+    )
+    space = SimpleNamespace(values=lambda theta: values)
+    summary = periodogram_period(model, space, np.zeros((6, 4)), observed, 1, 9.0)
+    assert summary["share"] == pytest.approx(0.5)
+    assert summary["median"] == pytest.approx(39.61)
+    assert summary["p16"] < 39.0  # the 13.2 s draw, kept where it was found
+    assert summary["p84"] <= 39.7

@@ -72,6 +72,9 @@ CONVENTIONS = {
 # of the whole-TOPEX-pass fit 35% narrower than 120 draws did (4.2 against 2.6 sigma from the
 # data's period); 64 keep it within ~10%.
 PERIODOGRAM_DRAWS = 64
+# A period within 3% of a power-of-2 multiple of the draws' median counts as that harmonic (a
+# light-curve period moves by ~1% over a pass's draws; a third harmonic is 58% of an octave off).
+_OCTAVE_TOLERANCE = math.log2(1.03)
 STEPS_PER_CYCLE = 24
 _MAX_STEPS = 20_000
 _AXES = {"x": 0, "y": 1, "z": 2}
@@ -205,7 +208,8 @@ def periodogram_period(
         ``{median, p16, p84, share}`` over the draws whose curve gave a period; None when none
         did. A short pass's model curve can repeat almost as well at half the turn, so the
         search finds P in some draws and P/2 in others: every draw is brought to the multiple
-        (a power of 2 apart) that most draws found, and ``share`` says how many found it.
+        (a power of 2 apart) that most draws found, and ``share`` says how many found it; a
+        period no power of 2 from the others (a third harmonic) stays as found.
     """
     data = LightCurve.from_pass(observed)
     times = observed.start_utc + (data.t_s * 1e9).round().astype("int64").astype("timedelta64[ns]")
@@ -224,11 +228,25 @@ def periodogram_period(
     if not found:
         return None
     found = np.array(found)
-    # Harmonics a power of 2 apart (the search's P, P/2, 2P), counted from the shortest found.
-    octave = np.round(np.log2(found / found.min())).astype(int)
-    values, counts = np.unique(octave, return_counts=True)
+    aligned, share = _to_modal_octave(found)
+    return _summary(aligned) | {"share": share}
+
+
+def _to_modal_octave(found: np.ndarray) -> tuple[np.ndarray, float]:
+    """`found` periods brought to the power-of-2 multiple (P, P/2, 2P, ...) that most of them are
+    at, and the share that is there. Octaves are counted from the found period with the most
+    others a power of 2 away (within `_OCTAVE_TOLERANCE`); a period that is none of them stays as
+    found: scaled, it would land on a wrong value."""
+    # (n, n): the octaves of every found period from every other (n is a few dozen draws).
+    octaves = np.log2(found[None, :] / found[:, None])
+    harmonic = np.abs(octaves - np.round(octaves)) < _OCTAVE_TOLERANCE
+    reference = int(np.argmax(harmonic.sum(axis=1)))
+    harmonic = harmonic[reference]
+    octave = np.round(octaves[reference]).astype(int)
+    values, counts = np.unique(octave[harmonic], return_counts=True)
     modal = values[np.argmax(counts)]
-    return _summary(found * 2.0 ** (modal - octave)) | {"share": float(counts.max() / found.size)}
+    aligned = np.where(harmonic, found * 2.0 ** (modal - octave), found)
+    return aligned, float(counts.max() / found.size)
 
 
 def _summary(periods: np.ndarray) -> dict:
