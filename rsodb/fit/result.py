@@ -426,7 +426,11 @@ class FitResult:
             lines.append(
                 f"  {name:<12} {value['median']:.6g} s ({value['p16']:.6g}-{value['p84']:.6g})  "
                 f"{definitions.get(name, '')}"
-                + (f"; found at this multiple in {share:.0%} of the draws, the rest at 2x or 1/2x" if share < 1 else "")
+                + (
+                    f"; found at this multiple in {share:.0%} of the draws, the rest a power of 2 from it or at no multiple"
+                    if share < 1
+                    else ""
+                )
             )
         if self.spin_periods.get("periodogram_period_s") is not None:
             lines.append(
