@@ -155,6 +155,8 @@ def whole_pass(args, argv) -> int:
     # Another exposure sub-sampling is another benchmark: the page keeps the default's figures.
     if args.n_sub != N_SUB_DEFAULT:
         mode += f", n_sub {args.n_sub}"
+    if args.cache_element_size_m:
+        mode += f", elements {1000 * args.cache_element_size_m:.0f} mm"
     # The fit's own rule (2 deg of turn a sub-sample at the prior's fastest period) may ask more.
     n_sub = problem.posterior.model.geometry.n_sub
     rule = choose_n_sub(observed.exposure_s, spin_period_bounds(problem.posterior.space)[0])
@@ -180,6 +182,7 @@ Sampler: {result.verdict.rstrip(".")}. Residual RMS over every sample of the win
     # The fixed-length and the until-converged runs are two benchmarks: the page shows both.
     name = f"fit_{args.pass_name}" + ("_converged" if args.until_converged else "")
     name += f"_n_sub_{args.n_sub}" if args.n_sub != N_SUB_DEFAULT else ""
+    name += f"_elements_{1000 * args.cache_element_size_m:.0f}mm" if args.cache_element_size_m else ""
     record(name, command("fit.py", argv), figures, section)
     return 0
 
@@ -210,6 +213,13 @@ def main(argv=None) -> int:
         help="--pass paper-mesh: the walkers' start (default multistart, as bench/fit_coverage.py's "
         "Cycles study: the differential-evolution search lands in another mode of this pass)",
     )
+    parser.add_argument(
+        "--cache-element-size-m",
+        type=float,
+        default=0.0,
+        help="--pass paper-mesh: the fit's largest surface element, m (0: the renderer's default; the Cycles "
+        "coverage study's intervals hold with 0.146, bench/fit_coverage.py)",
+    )
     parser.add_argument("--no-record", action="store_true", help="print only; record nothing")
     parser.add_argument(
         "--passes-dir",
@@ -217,6 +227,8 @@ def main(argv=None) -> int:
         "default: that script's default)",
     )
     args = parser.parse_args(argv)
+    if args.cache_element_size_m and args.pass_name != "paper-mesh":
+        parser.error("--cache-element-size-m is for --pass paper-mesh")
     if args.pass_name != "bench30":
         return whole_pass(args, argv)
 

@@ -713,6 +713,7 @@ def run_cycles(args, argv) -> int:
         if not records:
             print(f"no pass is fitted with these settings yet ({journal}); run without --journal-only", file=sys.stderr)
             return 1
+    from_journal = len(done)
     with tempfile.TemporaryDirectory() as scratch:
         tasks = [
             (str(directory), record, config, scratch, str(directory / "shapes"))
@@ -794,13 +795,22 @@ def run_cycles(args, argv) -> int:
         if folded
         else "Every phase scored modulo its full turn (no look-alike turn found)."
     )
+    model_text = forward_model_text(args)
+    fitted_now = len(records) - from_journal
+    run_text = f"{elapsed / 60:.0f} min of wall time on {os.cpu_count()} cores in the last run"
+    if from_journal:
+        run_text = (
+            f"{fitted_now} fitted in the last run ({elapsed / 60:.0f} min of wall time on {os.cpu_count()} cores), "
+            if fitted_now
+            else "all "
+        ) + f"{from_journal} taken from the journal of earlier runs with the same settings"
     refined = [sum(r["cycles"].get("refined_frames", {}).values()) for r in records]
     refined_text = f"{sum(refined)} frame renders in {sum(1 for n in refined if n)} of {len(records)} passes"
     section = f"""
 ## Fit coverage on Cycles-rendered passes ({today()}, bench/fit_coverage.py --cycles)
 
 {len(records)} passes{f" (of {rendered} rendered; the others not fitted yet)" if len(records) < rendered else ""} rendered by **Blender Cycles** (`raycast.cycles`) from the published workflow's own COSMOS
-2502 mesh and materials, fitted with the project's cached renderer of that mesh (no inverse crime:
+2502 mesh and materials, fitted with the project's cached renderer of that mesh{model_text} (no inverse crime:
 the data are not the fit's own model). 120 s windows of real COSMOS 2502 passes over Derenivka (TLE
 epoch 2024-01-09; sunlit, elevation > 25 deg, Sun below -8 deg), 5 fps, 0.2 s exposures (600 samples),
 magnitudes at 1000 km plus {NOISE_MAG} mag Gaussian noise; spin states drawn from the fit's prior (P 36-45 s,
@@ -812,7 +822,7 @@ Cycles noise (the two seeds' standard error) is above {CYCLES_NOISE_LIMIT_MAG} m
 {np.median([r["cycles"]["noise_mag_rms"] for r in records]):.4f} mag RMS per frame (median over passes; max
 {max(r["cycles"]["noise_mag_max"] for r in records):.4f}), is added in quadrature to each sample's quoted error. Fit: jitter free on 0-0.1 mag, {args.walkers} walkers,
 {args.steps} steps{" until converged (at most)" if args.until_converged else ""} ({args.moves} moves), global search first ({search}){limits}. The fits took
-{fit_minutes:.0f} min together, {elapsed / 60:.0f} min of wall time on {os.cpu_count()} cores in the last run (load average
+{fit_minutes:.0f} min together, {run_text} (load average
 {load[0]:.1f} at the end).
 
 | parameter | 68% coverage | 95% coverage (target >= {TARGETS["coverage95"]}) | mean bias, posterior sigmas (target < {TARGETS["bias_sigma"]}) |
@@ -832,7 +842,7 @@ pass's Cycles noise in quadrature, which a perfect model leaves): median {np.med
 
 ![truth's posterior quantile per parameter, Cycles passes](img/fit_coverage_cycles.png)
 
-Reproduce: `{command("fit_coverage.py", argv)}` (renders into `--passes-dir`, reused when present).
+Reproduce: `{command("fit_coverage.py", portable(argv))}` (renders into `--passes-dir`, reused when present).
 """
     figures = [
         figure("worst parameter's 95% coverage", f"{worst95:.2f}", f">= {TARGETS['coverage95']}"),
@@ -845,8 +855,40 @@ Reproduce: `{command("fit_coverage.py", argv)}` (renders into `--passes-dir`, re
         ),
         figure("passes", f"{len(records)}", ">= 10"),
     ]
-    record("fit_coverage_cycles", command("fit_coverage.py", argv), figures, section)
+    record("fit_coverage_cycles", command("fit_coverage.py", portable(argv)), figures, section)
     return 0
+
+
+def forward_model_text(args) -> str:
+    """The fit's forward-model settings that differ from the defaults, as a clause (or "")."""
+    settings = []
+    if args.cache_element_size_m:
+        settings.append(f"surface elements up to {1000 * args.cache_element_size_m:.0f} mm (`[model] element_size_m`)")
+    if args.cache_grid_size:
+        settings.append(f"a {args.cache_grid_size}-node direction grid")
+    if args.cache_accuracy_mag:
+        settings.append(f"a cache accuracy of {args.cache_accuracy_mag:g} mag")
+    if args.correlation_time_s:
+        settings.append(f"a model error correlated over {args.correlation_time_s:g} s")
+    if args.flux_error:
+        settings.append("a model error in flux")
+    return f" with {', '.join(settings)}" if settings else ""
+
+
+def portable(argv) -> list[str]:
+    """The arguments that reproduce a run: without ``--passes-dir`` and its directory (a path of this
+    machine's; left out, the command renders the passes of the same drawn truths into its default
+    directory) and without ``--journal-only`` (a report of fits that the command makes without it)."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    kept, skip = [], False
+    for arg in argv:
+        if skip:
+            skip = False
+        elif arg == "--passes-dir":
+            skip = True
+        elif arg != "--journal-only" and not arg.startswith("--passes-dir="):
+            kept.append(arg)
+    return kept
 
 
 def coverage_figure(recoveries, path: Path, names=None) -> None:

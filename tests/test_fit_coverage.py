@@ -159,6 +159,27 @@ def test_cycles_fit_configuration_takes_any_callers_settings():
     assert flux.likelihood.flux_error and flux.likelihood.correlation_time_s == 0
 
 
+def test_a_cycles_record_names_its_forward_model_and_no_local_directory():
+    """A coverage figure depends on the fit's cache settings, so its record says them; the passes'
+    directory is this machine's, so the recorded command leaves it out."""
+    from bench.fit_coverage import command_line, forward_model_text, portable
+
+    argv = [
+        "--cycles",
+        "--passes-dir",
+        "/tmp/x",
+        "--cache-element-size-m",
+        "0.146",
+        "--passes-dir=/tmp/y",
+        "--truths",
+        "10",
+    ]
+    assert portable(argv) == ["--cycles", "--cache-element-size-m", "0.146", "--truths", "10"]
+    assert forward_model_text(command_line().parse_args([])) == ""
+    text = forward_model_text(command_line().parse_args(["--cache-element-size-m", "0.146", "--flux-error"]))
+    assert text == " with surface elements up to 146 mm (`[model] element_size_m`), a model error in flux"
+
+
 def test_noisy_cycles_frames_are_rendered_again_with_more_samples():
     """Glint frames whose Cycles noise stays high get a second round; quiet frames none."""
     from dataclasses import dataclass
