@@ -797,13 +797,14 @@ def run_cycles(args, argv) -> int:
     )
     model_text = forward_model_text(args)
     fitted_now = len(records) - from_journal
-    run_text = f"{elapsed / 60:.0f} min of wall time on {os.cpu_count()} cores in the last run"
-    if from_journal:
-        run_text = (
-            f"{fitted_now} fitted in the last run ({elapsed / 60:.0f} min of wall time on {os.cpu_count()} cores), "
-            if fitted_now
-            else "all "
-        ) + f"{from_journal} taken from the journal of earlier runs with the same settings"
+    wall_text = f"{elapsed / 60:.0f} min of wall time on {os.cpu_count()} cores"
+    journal_text = f"{from_journal} taken from the journal of earlier runs with the same settings"
+    if not from_journal:
+        run_text = f"{wall_text} in the last run"
+    elif fitted_now:
+        run_text = f"{fitted_now} fitted in the last run ({wall_text}), {journal_text}"
+    else:
+        run_text = f"all {journal_text}"
     refined = [sum(r["cycles"].get("refined_frames", {}).values()) for r in records]
     refined_text = f"{sum(refined)} frame renders in {sum(1 for n in refined if n)} of {len(records)} passes"
     section = f"""

@@ -171,6 +171,7 @@ def test_a_cycles_record_names_its_forward_model_and_no_local_directory():
         "--cache-element-size-m",
         "0.146",
         "--passes-dir=/tmp/y",
+        "--journal-only",
         "--truths",
         "10",
     ]

@@ -240,9 +240,9 @@ def _to_modal_octave(found: np.ndarray) -> tuple[np.ndarray, float]:
     found: scaled, it would land on a wrong value."""
     # (n, n): the octaves of every found period from every other (n is a few dozen draws).
     octaves = np.log2(found[None, :] / found[:, None])
-    harmonic = np.abs(octaves - np.round(octaves)) < _OCTAVE_TOLERANCE
-    reference = int(np.argmax(harmonic.sum(axis=1)))
-    harmonic = harmonic[reference]
+    harmonic_pairs = np.abs(octaves - np.round(octaves)) < _OCTAVE_TOLERANCE
+    reference = int(np.argmax(harmonic_pairs.sum(axis=1)))
+    harmonic = harmonic_pairs[reference]
     octave = np.round(octaves[reference]).astype(int)
     values, counts = np.unique(octave[harmonic], return_counts=True)
     modal = values[np.argmax(counts)]
