@@ -51,7 +51,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from bench.record import command, figure, record, today  # noqa: E402
+from bench.record import command, figure, portable, record, today  # noqa: E402
 
 TOPEX_PHV = ROOT.parent / "shared" / "data" / "observations" / "result_22076_20240730_UT212240.phV"
 TARGET_S = 600.0
@@ -103,7 +103,6 @@ def whole_pass(args, argv) -> int:
     """Time one fit of a whole pass (``--pass topex-whole | paper-mesh``) and record it."""
     import json
 
-    from bench.fit_coverage import portable
     from ingest import read_file
     from raycast.geometry.pass_geometry import choose_n_sub
     from rsodb.fit.config import FitConfig

@@ -48,7 +48,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from bench.record import command, figure, record, today  # noqa: E402
+from bench.record import command, figure, portable, record, today  # noqa: E402
 
 SHARED = ROOT.parent / "shared" / "data"
 TOPEX_PHV = SHARED / "observations" / "result_22076_20240730_UT212240.phV"
@@ -874,22 +874,6 @@ def forward_model_text(args) -> str:
     if args.flux_error:
         settings.append("a model error in flux")
     return f" with {', '.join(settings)}" if settings else ""
-
-
-def portable(argv) -> list[str]:
-    """The arguments that reproduce a run: without ``--passes-dir`` and its directory (a path of this
-    machine's; left out, the command renders the passes of the same drawn truths into its default
-    directory) and without ``--journal-only`` (a report of fits that the command makes without it)."""
-    argv = list(sys.argv[1:] if argv is None else argv)
-    kept, skip = [], False
-    for arg in argv:
-        if skip:
-            skip = False
-        elif arg == "--passes-dir":
-            skip = True
-        elif arg != "--journal-only" and not arg.startswith("--passes-dir="):
-            kept.append(arg)
-    return kept
 
 
 def coverage_figure(recoveries, path: Path, names=None) -> None:

@@ -49,6 +49,24 @@ def command(script: str, argv: list[str] | None = None) -> str:
     return shlex.join(["python", f"bench/{script}", *(sys.argv[1:] if argv is None else argv)])
 
 
+def portable(argv) -> list[str]:
+    """The arguments that reproduce a run (``argv``, or this process's own when None), for
+    :func:`command`: without ``--passes-dir`` and its directory (a path of this machine's; left
+    out, bench/fit_coverage.py and bench/fit.py use the default directory, where the former
+    renders the passes of the same drawn truths) and without ``--journal-only`` (a report of
+    fits that the command makes without it)."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    kept, skip = [], False
+    for arg in argv:
+        if skip:
+            skip = False
+        elif arg == "--passes-dir":
+            skip = True
+        elif arg != "--journal-only" and not arg.startswith("--passes-dir="):
+            kept.append(arg)
+    return kept
+
+
 def figure(name: str, value: str, target: str = "") -> dict:
     """One headline figure of a run: a short name, the value with its unit, the target or ""."""
     return {"figure": name, "value": value, "target": target}

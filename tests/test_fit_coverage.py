@@ -162,7 +162,8 @@ def test_cycles_fit_configuration_takes_any_callers_settings():
 def test_a_cycles_record_names_its_forward_model_and_no_local_directory():
     """A coverage figure depends on the fit's cache settings, so its record says them; the passes'
     directory is this machine's, so the recorded command leaves it out."""
-    from bench.fit_coverage import command_line, forward_model_text, portable
+    from bench.fit_coverage import command_line, forward_model_text
+    from bench.record import portable
 
     argv = [
         "--cycles",

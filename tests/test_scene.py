@@ -139,6 +139,22 @@ def test_topex_surface_parameters_change_only_their_class():
         topex.build(gloss=0.1)
 
 
+def test_topex_dish_albedo_scales_only_the_dishes_light():
+    # Seen and lit from nadir (+z) the altimeter dish shows: its light is linear in
+    # antenna_albedo, the boom keeps its paint, and the rest of the scene does not move.
+    from raycast.renderer.direct import DirectRenderer
+
+    brdfs = topex.surface_brdfs(antenna_albedo=0.05)
+    assert brdfs["antenna"].albedo == 0.05 and brdfs["boom"].albedo == topex.ANTENNA_ALBEDO
+    sun = np.array([[0.2, 0.1, 1.0], [0.0, 0.3, 1.0]])
+    obs = np.array([[-0.1, 0.2, 1.0], [0.3, -0.2, 1.0]])
+    sun, obs = (v / np.linalg.norm(v, axis=1, keepdims=True) for v in (sun, obs))
+    light = [DirectRenderer(topex.build(antenna_albedo=a), 0.05).intensity(sun, obs) for a in (0.05, 0.45, 0.85)]
+    step = light[1] - light[0]
+    assert np.all(step > 0.02 * light[1])
+    np.testing.assert_allclose(light[2] - light[1], step, rtol=1e-9)
+
+
 def test_articulation_parameter_validation():
     with pytest.raises(ValueError, match=r"unknown articulation parameter\(s\) \['pitch'\]"):
         topex.build().with_parameters(pitch=3.0)

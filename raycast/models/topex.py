@@ -112,6 +112,14 @@ SURFACE_PARAMETERS = {
         "solar-array back: diffuse albedo",
         "Kapton array substrate, diffuse 0.67 new (Space Solar Power Review 1(3), 1980), darker with age",
     ),
+    "antenna_albedo": SurfaceParameter(
+        0.7,
+        0.05,
+        0.9,
+        "the altimeter's and the high-gain antenna's dishes: diffuse albedo",
+        "the dishes' finish on TOPEX is not published; reflectors are painted white (0.7-0.9) or covered by a "
+        "black Kapton sunshield (about 0.05), the range of Rodriguez et al., AMOS 2007",
+    ),
 }
 # The louvered variant (`build(louvers=True)`): the instrument module's walls carry thermal-control
 # louvers ("thermal control louvers in the IM walls open and close", JPL, "TOPEX/Poseidon:
@@ -153,7 +161,7 @@ LOUVERED_SURFACE_PARAMETERS = {
 }
 
 # Fixed parts of the surface classes (not fitted): the cells' dark diffuse layer, the dielectric
-# specular level of the bus, and the antennas' white paint.
+# specular level of the bus, and the antenna boom's white paint (the dishes' default).
 CELLS_DIFFUSE = 0.05
 BUS_SPECULAR = 0.5
 ANTENNA_ALBEDO = 0.7
@@ -184,7 +192,7 @@ def surface_brdfs(**values) -> dict:
             specular_ior_level=BUS_SPECULAR,
         ),
         "array_back": Lambertian(albedo=p["back_albedo"]),
-        "antenna": Lambertian(albedo=ANTENNA_ALBEDO),
+        "antenna": Lambertian(albedo=p["antenna_albedo"]),
         "boom": Lambertian(albedo=ANTENNA_ALBEDO),
     }
 
