@@ -3,6 +3,7 @@ errors, the command line, and (slow) a ladder on an injected pass whose true sha
 
 from __future__ import annotations
 
+from dataclasses import replace
 import json
 
 import numpy as np
@@ -12,12 +13,16 @@ from ingest import read_file
 from rsodb.archive import Archive
 from rsodb.campaign.ladder import (
     LadderPlan,
+    LadderResult,
     LadderSettings,
+    NaiveForecast,
     Rung,
     RungScore,
     choose_rung,
+    naive_forecast,
     run_ladder,
     score_ladder,
+    seasonal_naive,
 )
 from rsodb.cli import main
 from rsodb.fit.config import FitConfig
@@ -119,6 +124,45 @@ def test_failed_rungs_are_skipped_and_nothing_scored_chooses_nothing():
     assert choose_rung([failed], {}, 5, settings)[1:] == ("", "")
 
 
+def test_the_no_model_forecast_repeats_the_last_training_cycle():
+    # A curve periodic at 7 s is forecast to its interpolation error at the right lag and
+    # badly at a wrong one.
+    t = np.arange(0.0, 100.0, 0.1)
+    mag = np.sin(2 * np.pi * t / 7) + 0.3 * np.sin(4 * np.pi * t / 7 + 1)
+    train = t < 70.0
+    right = mag[~train] - seasonal_naive(t, mag, train, t[~train], 7.0)
+    wrong = mag[~train] - seasonal_naive(t, mag, train, t[~train], 7.5)
+    assert np.sqrt(np.mean(right**2)) < 0.01 < 0.3 < np.sqrt(np.mean(wrong**2))
+
+
+def test_the_no_model_forecast_doubles_a_half_period_on_the_training_window_only():
+    # Two unequal halves: the search's 7 s is half the repeat; the end of the training window
+    # says so and the lag becomes 14 s.
+    t = np.arange(0.0, 140.0, 0.1)
+    train, heldout = t < 100.0, t >= 100.0
+    halves = np.sin(2 * np.pi * t / 7) + 0.4 * np.sin(2 * np.pi * t / 14)
+    lag, residuals = naive_forecast(t, halves, train, heldout, 7.0)
+    assert lag == 14.0 and np.sqrt(np.mean(residuals**2)) < 0.01
+    # Periodic at 7 s with a growing amplitude: the most recent cycle forecasts best, so 7 s stays.
+    growing = (1 + t / 50) * np.sin(2 * np.pi * t / 7)
+    lag, residuals = naive_forecast(t, growing, train, heldout, 7.0)
+    assert lag == 7.0
+    # A forecast cannot use the held-out samples: changing them leaves the lag as it was.
+    changed = growing.copy()
+    changed[heldout] = np.sin(2 * np.pi * t[heldout] / 14)
+    assert naive_forecast(t, changed, train, heldout, 7.0)[0] == 7.0
+
+
+def test_the_ladder_says_how_the_best_rung_compares_with_no_model():
+    scores = (_score("ellipsoid-inertial", 5, 0.40), _score("box-inertial", 5, 0.55))
+    ladder = LadderResult("p", "lad", scores, "ellipsoid-inertial", "ellipsoid-inertial", 0.02, "", None)
+    assert "no model" not in ladder.table()
+    worse = replace(ladder, naive=NaiveForecast(9.48, 0.30, 0.02, 200))
+    assert "predicts 0.100 mag worse (+-0.020)" in worse.naive_text() and worse.naive_text() in worse.table()
+    assert "0.050 mag better" in replace(ladder, naive=NaiveForecast(9.48, 0.45, 0.02, 200)).naive_text()
+    assert worse.to_dict()["naive"]["heldout_rms_mag"] == 0.30
+
+
 @pytest.mark.parametrize(
     ("record", "message"),
     [
@@ -190,6 +234,14 @@ def test_the_ladder_chooses_the_true_shape_on_held_out_samples(injected, tmp_pat
     # Replayed at the posterior median (predict_fit), the true model predicts as well.
     replayed = score_ladder(injected, pass_id, plan, median=True).score("ellipsoid-inertial")
     assert replayed.median_heldout_rms_mag < 0.1
+
+    # With the pass's period stored, the no-model yardstick scores the same held-out samples:
+    # the last cycle carries its own noise and the interpolation between 0.8 s bins, so the
+    # true model predicts better.
+    assert ladder.naive is None
+    assert main(["periods", "--archive", str(injected.path)]) == 0
+    naive = score_ladder(injected, pass_id, plan).naive
+    assert naive.n_heldout == truth.n_heldout and naive.heldout_rms_mag > truth.heldout_rms_mag
 
     page = build_ladder_report(injected, [ladder]).write(tmp_path / "ladder.html").read_text()
     # The scores, the chosen rung's curve, and its fold: an ellipsoid's light curve repeats every

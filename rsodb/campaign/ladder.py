@@ -42,6 +42,9 @@ __all__ = [
     "score_ladder",
     "choose_rung",
     "median_rms",
+    "NaiveForecast",
+    "seasonal_naive",
+    "naive_forecast",
 ]
 
 # Detail of a shape and an attitude family, for ordering rungs of equal parameter count.
@@ -254,6 +257,38 @@ class RungScore:
 
 
 @dataclass(frozen=True)
+class NaiveForecast:
+    """The held-out samples predicted with no model: each is the training window's last sample at
+    the same phase of the light-curve period (:func:`seasonal_naive`).
+
+    A yardstick for the rungs' held-out RMS, not a rung: it has no spin state. A rung that
+    predicts the rest of the pass worse than this has not caught how the light curve changes with
+    the geometry, however well it fits its training window.
+
+    Attributes
+    ----------
+    period_s : float
+        The lag: the stored light-curve period, or twice it where that forecasts the end of the
+        training window better (a period search can find half the period of a body whose two
+        halves differ).
+    heldout_rms_mag : float
+        RMS of observed minus forecast over the rungs' held-out samples.
+    se_mag : float
+        Moving-block bootstrap standard error of the best rung's held-out RMS minus this one's (the
+        rungs' blocks and resamples); NaN when no rung scored.
+    n_heldout : int
+    """
+
+    period_s: float
+    heldout_rms_mag: float
+    se_mag: float = math.nan
+    n_heldout: int = 0
+
+    def to_dict(self) -> dict:
+        return {k: getattr(self, k) for k in self.__dataclass_fields__}
+
+
+@dataclass(frozen=True)
 class LadderResult:
     """The ladder of one pass: every rung's scores and the chosen rung.
 
@@ -269,6 +304,8 @@ class LadderResult:
     margin_floor_mag : float
     train_end_utc : str
         End of the training window; later samples are held out.
+    naive : NaiveForecast or None
+        The no-model yardstick on the same held-out samples (None when no rung has a fit).
     """
 
     pass_id: str
@@ -278,6 +315,7 @@ class LadderResult:
     best: str
     margin_floor_mag: float
     train_end_utc: str = ""
+    naive: NaiveForecast | None = None
 
     def score(self, rung: str) -> RungScore:
         return next(s for s in self.scores if s.rung == rung)
@@ -302,11 +340,28 @@ class LadderResult:
                 f"{'yes' if s.converged else 'no':>5} {s.median_train_rms_mag:13.3f} {s.median_heldout_rms_mag:8.3f}  "
                 f"{s.status}{mark}"
             )
+        if self.naive is not None:
+            rows.append(self.naive_text())
         rows.append(
             f"RMS in mag of the best-fit sample (median: of the posterior median, when replayed); chosen = simplest rung with held-out RMS within max({self.margin_floor_mag:.3f} mag, "
             "its bootstrap standard error) of the best"
         )
         return "\n".join(rows)
+
+    def naive_text(self) -> str:
+        """One line on the no-model yardstick and how the best rung compares with it."""
+        naive = self.naive
+        text = (
+            f"no model (each held-out sample = the last training sample at its phase of {naive.period_s:.4f} s): "
+            f"held-out RMS {naive.heldout_rms_mag:.3f} mag"
+        )
+        if not self.best:
+            return text
+        difference = self.score(self.best).heldout_rms_mag - naive.heldout_rms_mag
+        if not math.isfinite(difference):
+            return text
+        word = "better" if difference < 0 else "worse"
+        return f"{text}; the best rung predicts {abs(difference):.3f} mag {word} (+-{naive.se_mag:.3f})"
 
     def to_dict(self) -> dict:
         return {
@@ -317,6 +372,7 @@ class LadderResult:
             "margin_floor_mag": self.margin_floor_mag,
             "train_end_utc": self.train_end_utc,
             "scores": [s.to_dict() for s in self.scores],
+            "naive": None if self.naive is None else self.naive.to_dict(),
         }
 
 
@@ -345,6 +401,66 @@ def _block_indices(n: int, block: int, rng) -> np.ndarray:
 
 def _rms(values: np.ndarray) -> float:
     return float(np.sqrt(np.mean(values**2))) if values.size else math.nan
+
+
+def seasonal_naive(t_s: np.ndarray, mag: np.ndarray, train: np.ndarray, at_s: np.ndarray, period_s: float):
+    """Forecast magnitudes at times ``at_s`` (s, after the training samples) by the seasonal naive
+    rule (R.J. Hyndman, G. Athanasopoulos, *Forecasting: Principles and Practice*, 3rd ed., 2021,
+    section 5.2): each is the training curve at the time a whole number of periods earlier that
+    falls within the training window's last period, interpolated linearly between its samples.
+
+    Parameters
+    ----------
+    t_s, mag : (n,) float, sample times (s, increasing) and magnitudes.
+    train : (n,) bool, the samples the forecast may use (the last one ends the training window).
+    at_s : (k,) float, times to forecast, each after that end.
+    period_s : float
+
+    Returns
+    -------
+    (k,) float
+    """
+    t_train, m_train = t_s[train], mag[train]
+    end = t_train[-1]
+    lags = np.ceil((np.asarray(at_s, dtype=float) - end) / period_s)
+    return np.interp(at_s - lags * period_s, t_train, m_train)
+
+
+def naive_forecast(t_s, mag, train, heldout, period_s: float) -> tuple[float, np.ndarray]:
+    """(period, residuals): :func:`seasonal_naive`'s residuals (observed minus forecast) on the
+    ``heldout`` samples, with the lag chosen between ``period_s`` and twice it by which forecasts
+    the training window's last four periods better from what precedes them (the held-out samples
+    play no part in the choice). Training windows shorter than eight periods keep ``period_s``."""
+    train = np.asarray(train, dtype=bool)
+    t_train = t_s[train]
+    lag = period_s
+    cut = t_train[-1] - 4.0 * period_s
+    if t_train[-1] - t_train[0] >= 8.0 * period_s:
+        before, check = train & (t_s <= cut), train & (t_s > cut)
+        errors = {
+            candidate: _rms(mag[check] - seasonal_naive(t_s, mag, before, t_s[check], candidate))
+            for candidate in (period_s, 2.0 * period_s)
+        }
+        lag = min(errors, key=errors.get)
+    return lag, mag[heldout] - seasonal_naive(t_s, mag, train, t_s[heldout], lag)
+
+
+def _naive_yardstick(result: FitResult, observed, period_s: float, best_residuals, block: int, settings):
+    """:class:`NaiveForecast` on ``result``'s held-out samples (the rungs' own), with the bootstrap
+    standard error of ``best_residuals``' RMS minus its own."""
+    heldout = _heldout_mask(result.time_utc, result.in_window, observed)
+    if not heldout.any() or not math.isfinite(period_s):
+        return None
+    times = np.asarray(result.time_utc, dtype="datetime64[ns]")
+    t_s = (times - times[0]) / np.timedelta64(1, "s")
+    period, residuals = naive_forecast(t_s, result.mag_obs, result.in_window, heldout, period_s)
+    se = math.nan
+    if best_residuals is not None and best_residuals.size == residuals.size:
+        block = max(1, min(int(block), residuals.size // MIN_BLOCKS))
+        rng = np.random.default_rng(settings.seed)
+        picks = [_block_indices(residuals.size, block, rng) for _ in range(settings.bootstrap)]
+        se = float(np.std([_rms(best_residuals[i]) - _rms(residuals[i]) for i in picks], ddof=1))
+    return NaiveForecast(float(period), _rms(residuals), se, int(residuals.size))
 
 
 def _score(rung: Rung, fit_name: str, result: FitResult, observed) -> tuple[RungScore, np.ndarray]:
@@ -402,7 +518,7 @@ def score_ladder(
     observed = archive.get(pass_id)
     failures = dict(failures or {})
     stored = set(archive.result_names(observed.pass_id, "fits"))
-    scores, residuals, train_end = [], {}, ""
+    scores, residuals, train_end, any_result = [], {}, "", None
     for order, (rung, config) in enumerate(plan.configs(observed)):
         if config.name in failures:
             scores.append(
@@ -421,6 +537,7 @@ def score_ladder(
             train, held = median_rms(archive, observed.pass_id, config.name, observed)
             score = replace(score, median_train_rms_mag=train, median_heldout_rms_mag=held)
         train_end = str(result.window_utc[1])[:23]
+        any_result = any_result or result
         scores.append((score, order))
         residuals[rung.name] = heldout
     scores = [s for s, _ in sorted(scores, key=lambda pair: _complexity(*pair))]
@@ -430,8 +547,13 @@ def score_ladder(
         round(periods.best_period_s / cadence) if periods is not None and math.isfinite(periods.best_period_s) else 1
     )
     scores, chosen, best = choose_rung(scores, residuals, block, plan.settings)
+    naive = None
+    if any_result is not None and periods is not None:
+        naive = _naive_yardstick(
+            any_result, observed, float(periods.best_period_s), residuals.get(best), block, plan.settings
+        )
     return LadderResult(
-        observed.pass_id, plan.settings.name, scores, chosen, best, plan.settings.margin_floor_mag, train_end
+        observed.pass_id, plan.settings.name, scores, chosen, best, plan.settings.margin_floor_mag, train_end, naive
     )
 
 

@@ -39,6 +39,24 @@ def scores_table(ladder) -> Table:
                 role or s.status,
             )
         )
+    naive = ladder.naive
+    if naive is not None:
+        best = ladder.score(ladder.best).heldout_rms_mag if ladder.best else math.nan
+        rows.append(
+            (
+                f"no model: the last training cycle repeated ({naive.period_s:.4f} s)",
+                "0",
+                "-",
+                _cell(naive.heldout_rms_mag),
+                _cell(naive.heldout_rms_mag - best),
+                "-",
+                str(naive.n_heldout),
+                "-",
+                "-",
+                "-",
+                "yardstick",
+            )
+        )
     return Table(
         (
             "rung",
@@ -78,6 +96,10 @@ def scores_figure(ladder):
     if scored and ladder.best:
         best = ladder.score(ladder.best).heldout_rms_mag
         axis.axhspan(best, best + ladder.margin_floor_mag, color="C2", alpha=0.25, label="best + margin floor")
+    if ladder.naive is not None:
+        axis.axhline(
+            ladder.naive.heldout_rms_mag, color="k", ls="--", lw=1, label="held out, no model (last cycle repeated)"
+        )
     axis.set_xticks(x, [s.rung for s in ladder.scores], rotation=25, ha="right", fontsize=8)
     axis.set_ylabel("residual RMS (mag)")
     axis.set_title(f"{ladder.pass_id}: chosen {ladder.chosen or 'none'} (red)", fontsize=9)
@@ -88,6 +110,13 @@ def scores_figure(ladder):
 def ladder_section(archive, ladder) -> list:
     """Report blocks for one pass's ladder: heading, scores table and figure, the chosen rung's curve."""
     blocks = [Heading(f"Model ladder: {ladder.pass_id}", 3), scores_table(ladder)]
+    if ladder.naive is not None:
+        blocks.append(
+            Paragraph(
+                "Yardstick: " + ladder.naive_text() + ". A rung that predicts worse than repeating the last "
+                "training cycle has not caught how the light curve changes over the pass."
+            )
+        )
     blocks.append(figure_from_matplotlib(scores_figure(ladder), "training and held-out RMS of every rung"))
     if not ladder.chosen:
         blocks.append(Paragraph("No rung has a stored fit with held-out samples; nothing was chosen."))
