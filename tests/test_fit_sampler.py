@@ -107,6 +107,36 @@ def test_resume_refuses_a_chain_from_other_settings(tmp_path):
     assert fresh.resumed_from == 0
 
 
+def test_a_parameter_added_at_its_former_value_keeps_a_stored_chain_going(tmp_path):
+    # A chain stored before antenna_albedo was a parameter (its dishes held at 0.7) continues in
+    # a run that holds it fixed at 0.7: the same posterior. At any other value it is another
+    # posterior and the run refuses, as it does for a changed parameter the chain had.
+    from dataclasses import replace
+
+    @dataclass(frozen=True, eq=False)
+    class Before(SinusoidModel):
+        parameters = SinusoidModel.parameters + ("bus_albedo",)
+
+    @dataclass(frozen=True, eq=False)
+    class After(SinusoidModel):
+        parameters = SinusoidModel.parameters + ("bus_albedo", "antenna_albedo")
+
+    base = make_posterior()
+
+    def posterior(model, **fixed):
+        space = base.space
+        for name, value in fixed.items():
+            space = space.with_fixed(name, value)
+        return replace(base, space=space, model=model(base.model.t_s))
+
+    run_sampler(posterior(Before, bus_albedo=0.4), SMALL.replace(n_steps=15), tmp_path / "c.h5", progress=False)
+    rest = run_sampler(posterior(After, bus_albedo=0.4, antenna_albedo=0.7), SMALL, tmp_path / "c.h5", progress=False)
+    assert (rest.resumed_from, rest.steps_run) == (15, 25)
+    for fixed in ({"bus_albedo": 0.4, "antenna_albedo": 0.5}, {"bus_albedo": 0.5, "antenna_albedo": 0.7}):
+        with pytest.raises(ValueError, match="was started with different space"):
+            run_sampler(posterior(After, **fixed), SMALL.replace(n_steps=50), tmp_path / "c.h5", progress=False)
+
+
 def test_a_damaged_chain_file_falls_back_to_its_last_copy(tmp_path):
     posterior = make_posterior()
     path = tmp_path / "chain.h5"

@@ -54,6 +54,14 @@ HGA_DEPTH_M = 0.2
 HGA_BOOM_M = 2.6
 
 
+# Fixed parts of the surface classes (not fitted): the cells' dark diffuse layer, the dielectric
+# specular level of the bus, and the antenna boom's white paint (the dishes' default, and their
+# fixed value before antenna_albedo was a parameter).
+CELLS_DIFFUSE = 0.05
+BUS_SPECULAR = 0.5
+ANTENNA_ALBEDO = 0.7
+
+
 @dataclass(frozen=True)
 class SurfaceParameter:
     """A free reflectance parameter of one surface class, with its prior range and source."""
@@ -113,7 +121,7 @@ SURFACE_PARAMETERS = {
         "Kapton array substrate, diffuse 0.67 new (Space Solar Power Review 1(3), 1980), darker with age",
     ),
     "antenna_albedo": SurfaceParameter(
-        0.7,
+        ANTENNA_ALBEDO,
         0.05,
         0.9,
         "the altimeter's and the high-gain antenna's dishes: diffuse albedo",
@@ -159,12 +167,6 @@ LOUVERED_SURFACE_PARAMETERS = {
         "as cells_roughness: from a polished mirror's narrow lobe to a worn blade's broad one",
     ),
 }
-
-# Fixed parts of the surface classes (not fitted): the cells' dark diffuse layer, the dielectric
-# specular level of the bus, and the antenna boom's white paint (the dishes' default).
-CELLS_DIFFUSE = 0.05
-BUS_SPECULAR = 0.5
-ANTENNA_ALBEDO = 0.7
 
 
 def surface_brdfs(**values) -> dict:

@@ -164,6 +164,13 @@ KNOWN: Mapping[str, Known] = MappingProxyType(
 )
 
 
+# Parameters that became parameters after chains were stored, with the value the models held
+# them at before: a chain started then continues in a run that holds the parameter fixed at that
+# value (rsodb.fit.sampler), since its model is the same. A parameter added later gets its entry
+# here, its default being that former value.
+FORMERLY_FIXED: Mapping[str, float] = MappingProxyType({"antenna_albedo": topex.ANTENNA_ALBEDO})
+
+
 def describe(name: str) -> Known:
     """What the project knows about a parameter: its `KNOWN` entry, or, for another name ending
     in ``_deg``, an articulation angle of a mesh model (``[model] articulations``), or, for

@@ -47,6 +47,7 @@ import numpy as np
 from scipy.optimize import differential_evolution, minimize
 from tqdm.auto import tqdm
 
+from rsodb.fit.parameters import FORMERLY_FIXED
 from rsodb.pool import SINGLE_THREAD_ENV, environment
 
 __all__ = [
@@ -799,6 +800,18 @@ def _run_identity(posterior, settings: SamplerSettings) -> dict:
     }
 
 
+def _same_model(stored: Mapping, space: Mapping) -> bool:
+    """Whether the parameter space ``space`` (``ParameterSpace.to_dict``) is the stored chain's
+    ``stored`` with at most some parameters added since, each held fixed at the value the model
+    had before it was a parameter (`rsodb.fit.parameters.FORMERLY_FIXED`): the same posterior."""
+    if stored.get("free") != space.get("free"):
+        return False
+    before, now = stored.get("fixed", {}), space.get("fixed", {})
+    if any(name not in now or now[name] != value for name, value in before.items()):
+        return False
+    return all(name in FORMERLY_FIXED and now[name] == FORMERLY_FIXED[name] for name in set(now) - set(before))
+
+
 def _prepare_chain_file(chain_path: Path, identity: dict, restart: bool) -> int:
     """Make `chain_path` usable; return the number of steps it already holds."""
     backup = _backup_path(chain_path)
@@ -824,8 +837,10 @@ def _prepare_chain_file(chain_path: Path, identity: dict, restart: bool) -> int:
     if stored == 0 or previous is None:
         chain_path.unlink()
         return 0
-    if previous != identity:
-        changed = sorted(k for k in identity if previous.get(k) != identity[k])
+    changed = sorted(k for k in identity if previous.get(k) != identity[k])
+    if changed == ["space"] and _same_model(previous["space"], identity["space"]):
+        changed = []
+    if changed:
         raise ValueError(
             f"the chain in {chain_path} was started with different {', '.join(changed)}; "
             "run again with restart=True (--restart) to discard it, or restore the original settings"
