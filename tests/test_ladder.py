@@ -28,7 +28,7 @@ from rsodb.cli import main
 from rsodb.fit.config import FitConfig
 from rsodb.fit.coverage import inject, window
 from rsodb.fit.runner import FitProblem
-from rsodb.report.ladder_report import build_ladder_report
+from rsodb.report.ladder_report import build_ladder_report, scores_table
 from tests.conftest import PROJECT_ROOT, TOPEX_PHV
 
 PLAN = {
@@ -161,6 +161,9 @@ def test_the_ladder_says_how_the_best_rung_compares_with_no_model():
     assert "predicts 0.100 mag worse (+-0.020)" in worse.naive_text() and worse.naive_text() in worse.table()
     assert "0.050 mag better" in replace(ladder, naive=NaiveForecast(9.48, 0.45, 0.02, 200)).naive_text()
     assert worse.to_dict()["naive"]["heldout_rms_mag"] == 0.30
+    # The report's table ends with it as a row: no parameters, its held-out RMS minus the best's.
+    row = scores_table(worse).rows[-1]
+    assert row[0].startswith("no model") and row[1:5] == ("0", "-", "0.300", "-0.100")
 
 
 @pytest.mark.parametrize(
