@@ -568,6 +568,7 @@ def cache_label(options, title=False):
     words = {
         "normal_step_deg": ("normal step {:g} deg", "shading normals in steps of {:g} deg"),
         "normal_bins_per_step": ("{:g} normal bins per step", "shading classes {:g} per normal step"),
+        "element_size_m": ("elements {:g} m", "surface elements of {:g} m everywhere"),
     }
     return [words[key][title].format(value) for key, value in (options or {}).items() if value is not None]
 
@@ -724,7 +725,11 @@ def run_scenes(args, argv):
     names = tuple(args.scenes.split(",")) if args.scenes != "all" else None
     comparisons = comparison_scenes(MODELS, *([names] if names else []))
     load = os.getloadavg()[0]
-    cache_options = {"normal_step_deg": args.cache_normal_step_deg, "normal_bins_per_step": args.cache_normal_bins}
+    cache_options = {
+        "normal_step_deg": args.cache_normal_step_deg,
+        "normal_bins_per_step": args.cache_normal_bins,
+        "element_size_m": args.cache_element_size_m,
+    }
     # --partial keeps the rows of finished scenes in a JSON file, so a stopped run resumes.
     partial = Path(args.partial) if args.partial else None
     rows = json.loads(partial.read_text()) if partial and partial.exists() else []
@@ -833,6 +838,13 @@ def main(argv=None):
         default=None,
         help="with --scenes: the fast path's shading classes per normal step (SceneCache.build's "
         "normal_bins_per_step; default its own, 3)",
+    )
+    parser.add_argument(
+        "--cache-element-size-m",
+        type=float,
+        default=None,
+        help="with --scenes: the fast path's largest surface element, every triangle (SceneCache.build's "
+        "element_size_m; default the mesh radius / 30, half that on smooth glossy triangles)",
     )
     parser.add_argument(
         "--cycles-reference",

@@ -42,3 +42,5 @@ def test_the_normal_options_reach_the_build_and_name_the_rows():
     options = {"normal_step_deg": None, "normal_bins_per_step": 1.0}
     assert cache_label(options) == ["1 normal bins per step"]
     assert cache_label(options, title=True) == ["shading classes 1 per normal step"]
+    assert traced_build(plate, 4, element_size_m=0.2)[0].element_size_m == 0.2
+    assert cache_label({"element_size_m": 0.2}) == ["elements 0.2 m"]
