@@ -1,0 +1,187 @@
+"""The fast path's speed against its accuracy on one comparison scene, over its build settings.
+
+Each setting builds a `SceneCache` of the scene (raycast.cycles.comparison: the paper's COSMOS
+2502 mesh with all-Glossy materials by default, the scene where the fast path is slowest) and
+renders the 150-frame tumble light curve with it: the wall time per light curve (median of
+``--repeats`` runs after two warm-ups, all the process's threads) and the CPU time, against the
+direct renderer at pixels of the mesh radius / 300 on the same 150 frames (RMS and largest
+difference in magnitudes, frames where the direct renderer's scene is dark left out as in
+bench/render.py). The chart puts every setting on the plane of time and error, with the
+issue's target (<= 20 ms, <= 0.01 mag) as a box.
+
+    python bench/cache_frontier.py                              # paper_glossy, the settings below
+    python bench/cache_frontier.py --scene paper --settings "default;bins=1"
+
+A setting is ``default`` or options joined by commas: ``bins=`` (normal_bins_per_step),
+``elements=`` (element_size_m, as a fraction of the mesh radius written ``r/40`` or metres),
+``step=`` (normal_step_deg).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from pathlib import Path
+import statistics
+import sys
+import time
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+from bench.record import HISTORY, command, figure, record, today  # noqa: E402
+
+MODELS = ROOT.parent / "shared" / "data" / "models"
+CHART = ROOT / "docs" / "img" / "cache_frontier.png"
+SETTINGS = "default;bins=1;elements=r/40,bins=1;elements=r/30,bins=1;elements=r/30,bins=2;elements=r/30,bins=1,step=6"
+TARGET_MS, TARGET_MAG = 20.0, 0.01
+OPTIONS = {"bins": "normal_bins_per_step", "elements": "element_size_m", "step": "normal_step_deg"}
+
+
+def parse_setting(text: str, radius_m: float) -> dict:
+    """``SceneCache.build`` options of one setting (module docstring); ``{}`` for ``default``."""
+    text = text.strip()
+    if text == "default":
+        return {}
+    options = {}
+    for part in text.split(","):
+        key, _, value = part.partition("=")
+        if key not in OPTIONS or not value:
+            raise SystemExit(f"--settings: {part!r} is not one of {', '.join(k + '=' for k in OPTIONS)} with a value")
+        if key == "elements" and value.startswith("r/"):
+            options[OPTIONS[key]] = radius_m / float(value[2:])
+        else:
+            options[OPTIONS[key]] = float(value)
+    return options
+
+
+def timed_light_curves(cache, sun, obs, repeats: int) -> tuple[np.ndarray, float, float]:
+    """(intensity, median wall ms, median CPU ms) of ``repeats`` renders after two warm-ups."""
+    for _ in range(2):
+        values = cache.intensity(sun, obs)
+    walls, cpus = [], []
+    for _ in range(repeats):
+        wall, cpu = time.perf_counter(), time.process_time()
+        values = cache.intensity(sun, obs)
+        walls.append(1e3 * (time.perf_counter() - wall))
+        cpus.append(1e3 * (time.process_time() - cpu))
+    return values, statistics.median(walls), statistics.median(cpus)
+
+
+def chart(rows, scene: str, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figure_, axis = plt.subplots(figsize=(6.4, 4.0), layout="constrained")
+    axis.add_patch(plt.Rectangle((0, 0), TARGET_MS, TARGET_MAG, color="C2", alpha=0.2, label="target"))
+    for row in rows:
+        axis.plot(row["wall_ms"], row["rms_mag"], "o", color="C0")
+        axis.annotate(
+            row["setting"], (row["wall_ms"], row["rms_mag"]), fontsize=7, xytext=(4, 3), textcoords="offset points"
+        )
+    axis.set_xscale("log")
+    axis.set_yscale("log")
+    plain = matplotlib.ticker.FormatStrFormatter("%g")
+    for which in (axis.xaxis, axis.yaxis):
+        which.set_major_formatter(plain)
+        which.set_minor_formatter(plain)
+    axis.tick_params(which="minor", labelsize=7)
+    axis.set_xlabel("wall time per 150-frame light curve (ms)")
+    axis.set_ylabel("RMS from the direct renderer (mag)")
+    axis.set_title(f"fast path on {scene}: speed against accuracy by build setting", fontsize=9)
+    axis.legend(fontsize=7)
+    figure_.savefig(path, dpi=110)
+    plt.close(figure_)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scene", default="paper_glossy", help="a comparison scene (default paper_glossy)")
+    parser.add_argument("--settings", default=SETTINGS, help=f"settings joined by ';' (default {SETTINGS!r})")
+    parser.add_argument("--repeats", type=int, default=7, help="timed light curves per setting (default 7)")
+    parser.add_argument("--no-record", action="store_true", help="print only")
+    parser.add_argument("--chart-only", action="store_true", help="redraw the chart from the last recorded run")
+    args = parser.parse_args(argv)
+    if args.chart_only:
+        runs = [r for r in map(json.loads, HISTORY.read_text().splitlines()) if r["benchmark"] == "cache_frontier"]
+        if not runs:
+            raise SystemExit(f"no cache_frontier run in {HISTORY}; run the benchmark first")
+        chart(runs[-1]["data"], runs[-1]["section"].split("Scene `")[1].split("`")[0], CHART)
+        return 0
+    from raycast.cycles.comparison import DARK_FRACTION, comparison_scenes, mag_difference, tumble_frames
+    from raycast.renderer.cache import SceneCache
+    from raycast.renderer.direct import DirectRenderer
+
+    scene = comparison_scenes(MODELS, (args.scene,))[args.scene].scene
+    radius_m = scene.posed().radius_m
+    settings = [(text.strip(), parse_setting(text, radius_m)) for text in args.settings.split(";")]
+    frames = tumble_frames(150)
+    reference = DirectRenderer(scene, radius_m / 300.0).intensity(frames.sun_body, frames.obs_body)
+    rows = []
+    for text, options in settings:
+        started = time.perf_counter()
+        cache = SceneCache.build(scene, **options)
+        build_s = time.perf_counter() - started
+        values, wall_ms, cpu_ms = timed_light_curves(cache, frames.sun_body, frames.obs_body, args.repeats)
+        error = mag_difference(values, reference)
+        error = error[np.isfinite(error)]
+        row = {
+            "setting": text,
+            "options": options,
+            "classes": int(cache.poses[0].n_classes),
+            "elements": int(cache.n_elements),
+            "build_s": build_s,
+            "wall_ms": wall_ms,
+            "cpu_ms": cpu_ms,
+            "rms_mag": float(np.sqrt(np.mean(error**2))),
+            "max_mag": float(np.max(np.abs(error))),
+        }
+        rows.append(row)
+        print(
+            f"{text}: {row['classes']} classes, {row['elements']} elements, build {build_s:.0f} s; "
+            f"{wall_ms:.1f} ms wall ({cpu_ms:.1f} ms CPU) a light curve; {row['rms_mag']:.4f} mag RMS "
+            f"(max {row['max_mag']:.4f}) from the direct renderer",
+            flush=True,
+        )
+    meets = [r for r in rows if r["wall_ms"] <= TARGET_MS and r["rms_mag"] <= TARGET_MAG]
+    print("settings meeting both targets: " + (", ".join(r["setting"] for r in meets) or "none"))
+    if args.no_record:
+        return 0
+    chart(rows, args.scene, CHART)
+    lines = [
+        f"| {r['setting']} | {r['classes']} | {r['elements']} | {r['build_s']:.0f} | {r['wall_ms']:.1f} | "
+        f"{r['cpu_ms']:.1f} | {r['rms_mag']:.4f} | {r['max_mag']:.4f} |"
+        for r in rows
+    ]
+    section = (
+        f"""
+## The fast path's speed against its accuracy ({today()}, bench/cache_frontier.py)
+
+Scene `{args.scene}` (raycast.cycles.comparison), radius {radius_m:.2f} m; the 150-frame tumble light curve
+rendered by the fast path built with each setting, against the direct renderer at pixels of radius / 300 on
+the same frames (frames darker than {DARK_FRACTION:g} of the brightest left out, as in bench/render.py). Times: median of {args.repeats} light curves after two warm-ups, wall (all threads) and CPU.
+Targets: <= {TARGET_MS:g} ms and <= {TARGET_MAG:g} mag RMS. Settings meeting both:
+{", ".join(r["setting"] for r in meets) or "none"}. Load average at the end {os.getloadavg()[0]:.1f}.
+
+| setting | shading classes | elements | build (s) | wall (ms) | CPU (ms) | RMS (mag) | max (mag) |
+|---|---|---|---|---|---|---|---|
+"""
+        + "\n".join(lines)
+        + f"\n\n![fast path: speed against accuracy]({CHART.relative_to(ROOT / 'docs')})\n"
+    )
+    figures = [
+        figure(
+            f"{args.scene}, {r['setting']}", f"{r['wall_ms']:.1f} ms wall, {r['rms_mag']:.4f} mag", "<= 20 ms, <= 0.01"
+        )
+        for r in rows
+    ]
+    record("cache_frontier", command("cache_frontier.py", argv), figures, section, data=rows)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
