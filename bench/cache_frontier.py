@@ -23,17 +23,15 @@ import argparse
 import json
 import os
 from pathlib import Path
-import statistics
 import sys
-import time
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 from bench.record import HISTORY, command, figure, record, today  # noqa: E402
+from bench.render import MODELS, timed  # noqa: E402
 
-MODELS = ROOT.parent / "shared" / "data" / "models"
 CHART = ROOT / "docs" / "img" / "cache_frontier.png"
 SETTINGS = "default;bins=1;elements=r/40,bins=1;elements=r/30,bins=1;elements=r/30,bins=2;elements=r/30,bins=1,step=6"
 TARGET_MS, TARGET_MAG = 20.0, 0.01
@@ -60,14 +58,9 @@ def parse_setting(text: str, radius_m: float) -> dict:
 def timed_light_curves(cache, sun, obs, repeats: int) -> tuple[np.ndarray, float, float]:
     """(intensity, median wall ms, median CPU ms) of ``repeats`` renders after two warm-ups."""
     for _ in range(2):
-        values = cache.intensity(sun, obs)
-    walls, cpus = [], []
-    for _ in range(repeats):
-        wall, cpu = time.perf_counter(), time.process_time()
-        values = cache.intensity(sun, obs)
-        walls.append(1e3 * (time.perf_counter() - wall))
-        cpus.append(1e3 * (time.process_time() - cpu))
-    return values, statistics.median(walls), statistics.median(cpus)
+        cache.intensity(sun, obs)
+    values, wall_s, cpu_s = timed(lambda: cache.intensity(sun, obs), repeats)
+    return values, 1e3 * wall_s, 1e3 * cpu_s
 
 
 def chart(rows, scene: str, path: Path) -> None:
@@ -123,9 +116,7 @@ def main(argv=None) -> int:
     reference = DirectRenderer(scene, radius_m / 300.0).intensity(frames.sun_body, frames.obs_body)
     rows = []
     for text, options in settings:
-        started = time.perf_counter()
-        cache = SceneCache.build(scene, **options)
-        build_s = time.perf_counter() - started
+        cache, build_s, _ = timed(lambda: SceneCache.build(scene, **options))
         values, wall_ms, cpu_ms = timed_light_curves(cache, frames.sun_body, frames.obs_body, args.repeats)
         error = mag_difference(values, reference)
         error = error[np.isfinite(error)]
