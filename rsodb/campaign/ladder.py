@@ -399,6 +399,20 @@ def _block_indices(n: int, block: int, rng) -> np.ndarray:
     return (starts[:, None] + np.arange(block)).ravel()[:n]
 
 
+def _bootstrap_picks(n: int, block: int, settings) -> list[np.ndarray]:
+    """``settings.bootstrap`` moving-block resamples of n held-out samples, seeded by
+    ``settings.seed``: the same for every comparison of one ladder (a paired bootstrap)."""
+    # At least MIN_BLOCKS blocks, or every resample is the same block and the error reads as zero.
+    block = max(1, min(int(block), n // MIN_BLOCKS))
+    rng = np.random.default_rng(settings.seed)
+    return [_block_indices(n, block, rng) for _ in range(settings.bootstrap)]
+
+
+def _paired_se(residuals: np.ndarray, reference: np.ndarray, picks) -> float:
+    """Bootstrap standard error of RMS(residuals) - RMS(reference) over the resamples ``picks``."""
+    return float(np.std([_rms(residuals[i]) - _rms(reference[i]) for i in picks], ddof=1))
+
+
 def _rms(values: np.ndarray) -> float:
     return float(np.sqrt(np.mean(values**2))) if values.size else math.nan
 
@@ -456,10 +470,7 @@ def _naive_yardstick(result: FitResult, observed, period_s: float, best_residual
     period, residuals = naive_forecast(t_s, result.mag_obs, result.in_window, heldout, period_s)
     se = math.nan
     if best_residuals is not None and best_residuals.size == residuals.size:
-        block = max(1, min(int(block), residuals.size // MIN_BLOCKS))
-        rng = np.random.default_rng(settings.seed)
-        picks = [_block_indices(residuals.size, block, rng) for _ in range(settings.bootstrap)]
-        se = float(np.std([_rms(best_residuals[i]) - _rms(residuals[i]) for i in picks], ddof=1))
+        se = _paired_se(best_residuals, residuals, _bootstrap_picks(residuals.size, block, settings))
     return NaiveForecast(float(period), _rms(residuals), se, int(residuals.size))
 
 
@@ -518,7 +529,7 @@ def score_ladder(
     observed = archive.get(pass_id)
     failures = dict(failures or {})
     stored = set(archive.result_names(observed.pass_id, "fits"))
-    scores, residuals, train_end, any_result = [], {}, "", None
+    scores, residuals, train_end, first_result = [], {}, "", None
     for order, (rung, config) in enumerate(plan.configs(observed)):
         if config.name in failures:
             scores.append(
@@ -537,7 +548,7 @@ def score_ladder(
             train, held = median_rms(archive, observed.pass_id, config.name, observed)
             score = replace(score, median_train_rms_mag=train, median_heldout_rms_mag=held)
         train_end = str(result.window_utc[1])[:23]
-        any_result = any_result or result
+        first_result = first_result or result
         scores.append((score, order))
         residuals[rung.name] = heldout
     scores = [s for s, _ in sorted(scores, key=lambda pair: _complexity(*pair))]
@@ -548,9 +559,9 @@ def score_ladder(
     )
     scores, chosen, best = choose_rung(scores, residuals, block, plan.settings)
     naive = None
-    if any_result is not None and periods is not None:
+    if first_result is not None and periods is not None:
         naive = _naive_yardstick(
-            any_result, observed, float(periods.best_period_s), residuals.get(best), block, plan.settings
+            first_result, observed, float(periods.best_period_s), residuals.get(best), block, plan.settings
         )
     return LadderResult(
         observed.pass_id, plan.settings.name, scores, chosen, best, plan.settings.margin_floor_mag, train_end, naive
@@ -582,15 +593,11 @@ def choose_rung(
         return tuple(scores), "", ""
     best = min(scored, key=lambda s: s.heldout_rms_mag)
     reference = residuals[best.rung]
-    # At least MIN_BLOCKS blocks, or every resample is the same block and the error reads as zero.
-    block = max(1, min(int(block), reference.size // MIN_BLOCKS))
-    rng = np.random.default_rng(settings.seed)
-    picks = [_block_indices(reference.size, block, rng) for _ in range(settings.bootstrap)]
+    picks = _bootstrap_picks(reference.size, block, settings)
     with_se, chosen = [], ""
     for s in scores:
         if s.ok and s.rung != best.rung and residuals[s.rung].size == reference.size:
-            differences = [_rms(residuals[s.rung][i]) - _rms(reference[i]) for i in picks]
-            s = replace(s, heldout_se_mag=float(np.std(differences, ddof=1)))
+            s = replace(s, heldout_se_mag=_paired_se(residuals[s.rung], reference, picks))
         elif s.rung == best.rung:
             s = replace(s, heldout_se_mag=0.0)
         margin = max(settings.margin_floor_mag, s.heldout_se_mag if math.isfinite(s.heldout_se_mag) else 0.0)
