@@ -29,8 +29,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from bench.record import HISTORY, command, figure, record, today  # noqa: E402
-from bench.render import MODELS, timed  # noqa: E402
+from bench.record import HISTORY, command, figure, record, timed, today  # noqa: E402
+from bench.render import MODELS  # noqa: E402
 
 CHART = ROOT / "docs" / "img" / "cache_frontier.png"
 SETTINGS = "default;bins=1;elements=r/40,bins=1;elements=r/30,bins=1;elements=r/30,bins=2;elements=r/30,bins=1,step=6"

@@ -10,7 +10,7 @@ of the misfit that needs shadows or another attitude. With ``--holdout`` the att
 areas are fitted on the first part of the pass and scored on the rest, as the model ladder does.
 
     python bench/convex_bound.py                          # the real TOPEX pass, inertial spin, 100 facets
-    python bench/convex_bound.py --facets 50,100 --attitudes inertial,precessing
+    python bench/convex_bound.py --facets 50,100 --attitudes inertial,precessing,torque_free
 
 Prints and records (docs/benchmarks.md) the RMS over every sample and the held-out RMS.
 """
@@ -25,6 +25,7 @@ import time
 
 import numpy as np
 from scipy.optimize import differential_evolution, nnls
+from scipy.stats import qmc
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -41,7 +42,18 @@ RANGES = {
         "precession_phase_deg": (0.0, 360.0),
         "precession_angle_deg": (0.0, 90.0),
     },
+    "torque_free": {
+        "spin_phase_deg": (0.0, 360.0),
+        "pole_ra_deg": (0.0, 360.0),
+        "pole_dec_deg": (-90.0, 90.0),
+        "inertia_ratio_2": (0.2, 5.0),
+        "inertia_ratio_3": (0.2, 5.0),
+        "omega_polar_deg": (0.0, 180.0),
+        "omega_azimuth_deg": (0.0, 360.0),
+    },
 }
+# Differential evolution's population: this many members per searched parameter.
+POPSIZE = 12
 # A sample the model misses by more than this counts as this much (a dark model sample is +inf).
 CLIP_MAG = 5.0
 
@@ -62,13 +74,14 @@ class ConvexBound:
     def __init__(self, observed, attitude: str, normals: np.ndarray, roughnesses=(0.08, 0.3)):
         from raycast.renderer.brdf import GGX, Lambertian
         from rsodb.fit.curves import geometry_at
-        from rsodb.fit.model import SpinStateModel
+        from rsodb.fit.model import ATTITUDES, SpinStateModel
 
         self.mag = np.asarray(observed.best_mag, dtype=float)
         self.usable = np.isfinite(self.mag) & np.asarray(observed.valid, bool)
         geometry = geometry_at(observed, observed.time_utc, observed.exposure_s, 1, None)
         # The attitude's frames only: the brightness is this class's own.
         self.model = SpinStateModel(geometry, None, attitude)
+        self.supports = ATTITUDES[attitude].supports
         self.geometry = geometry
         self.normals = normals
         self.brdfs = [Lambertian(1.0)] + [GGX(1.0, r) for r in roughnesses]
@@ -95,20 +108,41 @@ class ConvexBound:
             return -2.5 * np.log10(design @ areas)
 
     def rms(self, values, fit_rows: np.ndarray, score_rows: np.ndarray) -> float:
-        """Residual RMS (mag) over `score_rows` with the areas fitted on `fit_rows`."""
+        """Residual RMS (mag) over `score_rows` with the areas fitted on `fit_rows`; CLIP_MAG where
+        the attitude describes no physical body (a torque-free body's moments that break the
+        triangle inequality)."""
+        if not self.supports(values):
+            return CLIP_MAG
         design = self.design(values)
         residual = self.model_mag(design, self.fit_areas(design, fit_rows)) - self.mag
         return float(np.sqrt(np.mean(np.minimum(residual[score_rows] ** 2, CLIP_MAG**2))))
 
 
-def search(bound: ConvexBound, names, ranges, fit_rows, seed: int, maxiter: int):
-    """(best values, their RMS on `fit_rows`, evaluations) of differential evolution over the attitude."""
+def search(bound: ConvexBound, names, ranges, fit_rows, seed: int, maxiter: int, start=None):
+    """(best values, their RMS on `fit_rows`, evaluations) of differential evolution over the attitude.
+
+    `start` (values by name), when given, is one member of the first generation, the others a Latin
+    hypercube over the ranges: the search then ends no worse than that start."""
 
     def cost(x):
         return bound.rms(dict(zip(names, x)), fit_rows, fit_rows)
 
-    found = differential_evolution(cost, ranges, popsize=12, maxiter=maxiter, seed=seed, polish=False, tol=1e-4)
+    init = "latinhypercube"
+    if start is not None:
+        low, high = np.array(ranges, dtype=float).T
+        init = low + qmc.LatinHypercube(d=len(names), seed=seed).random(POPSIZE * len(names)) * (high - low)
+        init[0] = [start[name] for name in names]
+    found = differential_evolution(
+        cost, ranges, popsize=POPSIZE, maxiter=maxiter, seed=seed, polish=False, tol=1e-4, init=init
+    )
     return dict(zip(names, found.x)), float(found.fun), int(found.nfev)
+
+
+def as_torque_free(inertial) -> dict:
+    """Torque-free values of the same motion as an inertial spin about body z: the angular velocity
+    along z, the axis of the largest moment (a steady spin), its angular momentum at the pole."""
+    same = {name: inertial[name] for name in ("spin_period_s", "spin_phase_deg", "pole_ra_deg", "pole_dec_deg")}
+    return same | {"inertia_ratio_2": 1.5, "inertia_ratio_3": 2.0, "omega_polar_deg": 0.0, "omega_azimuth_deg": 0.0}
 
 
 def main(argv=None) -> int:
@@ -117,7 +151,9 @@ def main(argv=None) -> int:
         "--pass-file", type=Path, default=TOPEX_PHV, help="observation file (default: the real TOPEX pass)"
     )
     parser.add_argument("--facets", default="100", help="facet counts, joined by commas (default 100)")
-    parser.add_argument("--attitudes", default="inertial", help="inertial and/or precessing, joined by commas")
+    parser.add_argument(
+        "--attitudes", default="inertial", help=f"attitude families, joined by commas: {', '.join(RANGES)}"
+    )
     parser.add_argument("--holdout", type=float, default=0.3, help="share of the pass held out at its end (0: none)")
     parser.add_argument("--maxiter", type=int, default=60, help="differential-evolution generations")
     parser.add_argument("--seed", type=int, default=1)
@@ -131,20 +167,31 @@ def main(argv=None) -> int:
     if not math.isfinite(period):
         raise SystemExit(f"{args.pass_file}: the period search found no period to centre the spin period's range on")
     rows = []
+    # Best attitudes by (family, facets, part of the pass): a torque-free search starts from the
+    # inertial one (a special case of it), found first where not asked for.
+    best = {}
+
+    def searched(attitude, n, part, rows_):
+        if (attitude, n, part) not in best:
+            bound = ConvexBound(observed, attitude, fibonacci_sphere(n))
+            names = ["spin_period_s", *RANGES[attitude]]
+            ranges = [(0.99 * period, 1.01 * period), *RANGES[attitude].values()]
+            start = as_torque_free(searched("inertial", n, part, rows_)[0]) if attitude == "torque_free" else None
+            best[attitude, n, part] = search(bound, names, ranges, rows_, args.seed, args.maxiter, start)
+        return best[attitude, n, part]
+
     for attitude in args.attitudes.split(","):
         if attitude not in RANGES:
             raise SystemExit(f"--attitudes: {attitude!r} is not one of {', '.join(RANGES)}")
         for n in (int(v) for v in args.facets.split(",")):
             bound = ConvexBound(observed, attitude, fibonacci_sphere(n))
-            names = ["spin_period_s", *RANGES[attitude]]
-            ranges = [(0.99 * period, 1.01 * period), *RANGES[attitude].values()]
             started = time.perf_counter()
-            values, whole, evaluations = search(bound, names, ranges, bound.usable, args.seed, args.maxiter)
+            values, whole, evaluations = searched(attitude, n, "whole", bound.usable)
             row = {"attitude": attitude, "facets": n, "whole_rms": whole, "whole": values, "evaluations": evaluations}
             if args.holdout > 0:
                 cut = np.arange(len(observed)) < round((1.0 - args.holdout) * len(observed))
                 train, held = bound.usable & cut, bound.usable & ~cut
-                values, row["train_rms"], _ = search(bound, names, ranges, train, args.seed, args.maxiter)
+                values, row["train_rms"], _ = searched(attitude, n, "train", train)
                 row["heldout_rms"] = bound.rms(values, train, held)
                 row["train"] = values
             row["seconds"] = time.perf_counter() - started
@@ -175,7 +222,8 @@ spread evenly over the sphere, each with a Lambertian term and GGX lobes of roug
 project's BRDFs), their areas non-negative and fitted by least squares on the relative flux for each trial
 attitude; the attitude by differential evolution (spin period within +-1% of the period search's
 {period:.4f} s). No facet shadows another, so the fit is the search's best: an upper bound on what the best
-convex body spinning this way leaves (differential evolution, 12 x parameters x {args.maxiter} generations).
+convex body spinning this way leaves (differential evolution, {POPSIZE} x parameters x {args.maxiter} generations; the torque-free
+search starts from the inertial one's best, a special case of it).
 Held out: the last {args.holdout:.0%} of the pass, the areas and attitude fitted on the rest.
 
 | attitude | facets | RMS over every sample (mag) | fitted part (mag) | held out (mag) | whole-pass attitude |

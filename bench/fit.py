@@ -42,7 +42,6 @@ import os
 from pathlib import Path
 import platform
 import resource
-import statistics
 import sys
 import tempfile
 import time
@@ -51,7 +50,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from bench.record import command, figure, portable, record, today  # noqa: E402
+from bench.record import command, figure, portable, record, timed, today  # noqa: E402
 
 TOPEX_PHV = ROOT.parent / "shared" / "data" / "observations" / "result_22076_20240730_UT212240.phV"
 TARGET_S = 600.0
@@ -73,17 +72,6 @@ def config_record(n_sub: int, steps: int, walkers: int, processes: int) -> dict:
         "parameters": {"spin_period_s": {"kind": "uniform", "low": 9.86 * 0.99, "high": 9.86 * 1.01}},
         "sampler": {"n_walkers": walkers, "n_steps": steps, "processes": processes, "seed": 1, "search_points": 60},
     }
-
-
-def timed(function, repeats: int) -> tuple[float, float]:
-    """(median wall s, median CPU s) of `repeats` calls."""
-    walls, cpus = [], []
-    for _ in range(repeats):
-        wall, cpu = time.perf_counter(), time.process_time()
-        function()
-        walls.append(time.perf_counter() - wall)
-        cpus.append(time.process_time() - cpu)
-    return statistics.median(walls), statistics.median(cpus)
 
 
 WHOLE_TARGETS_S = {"topex-whole": 600.0, "paper-mesh": 900.0}
@@ -275,7 +263,7 @@ def main(argv=None) -> int:
     for n_sub in (1, 2, 4):
         problem = FitProblem.build(observed, FitConfig.from_dict(config_record(n_sub, 10, 20, 1)))
         theta = problem.posterior.space.vector({**TRUTH, "jitter_mag": 0.0})
-        wall, cpu = timed(lambda: problem.posterior(theta), 10)
+        _, wall, cpu = timed(lambda: problem.posterior(theta), 10)
         error = float(np.sqrt(np.mean((problem.posterior.model.magnitudes(TRUTH) - fine_mag) ** 2)))
         rows.append((n_sub, wall, cpu, error))
         print(
@@ -286,7 +274,7 @@ def main(argv=None) -> int:
     body = reference.posterior.model.geometry.body_frame(reference.posterior.model.attitude_model(TRUTH))
     direct = DirectRenderer(reference.posterior.model.brightness.scene, 0.06)
     sun, obs = body.sun_body[:, 0], body.obs_body[:, 0]
-    direct_wall, direct_cpu = timed(lambda: direct.intensity(sun, obs), 1)
+    _, direct_wall, direct_cpu = timed(lambda: direct.intensity(sun, obs))
     print(f"peer: direct ray caster, 150 frames, 6 cm rays: {direct_wall:.2f} s wall, {direct_cpu:.2f} s CPU")
 
     config = FitConfig.from_dict(config_record(args.n_sub, args.steps, args.walkers, args.processes))

@@ -22,7 +22,9 @@ import os
 from pathlib import Path
 import re
 import shlex
+import statistics
 import sys
+import time
 
 ROOT = Path(__file__).resolve().parents[1]
 HISTORY = ROOT / "docs" / "benchmarks" / "history.jsonl"
@@ -65,6 +67,17 @@ def portable(argv) -> list[str]:
         elif arg != "--journal-only" and not arg.startswith("--passes-dir="):
             kept.append(arg)
     return kept
+
+
+def timed(function, repeats=1):
+    """(result, median wall seconds, median CPU seconds of this process) of `repeats` calls."""
+    walls, cpus, result = [], [], None
+    for _ in range(repeats):
+        wall, cpu = time.perf_counter(), time.process_time()
+        result = function()
+        walls.append(time.perf_counter() - wall)
+        cpus.append(time.process_time() - cpu)
+    return result, statistics.median(walls), statistics.median(cpus)
 
 
 def figure(name: str, value: str, target: str = "") -> dict:

@@ -38,14 +38,13 @@ import os
 from pathlib import Path
 import resource
 import sys
-import time
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bench.record import command, figure, latest, record, today  # noqa: E402
+from bench.record import command, figure, latest, record, timed, today  # noqa: E402
 from raycast.geometry.attitude import PrecessingSpin  # noqa: E402
 from raycast.models import topex  # noqa: E402
 from raycast.renderer.cache import SceneCache  # noqa: E402
@@ -96,17 +95,6 @@ DARK_FRACTION = 1e-3
 def rms_mag(value, reference):
     ok = reference > DARK_FRACTION * reference.max()
     return float(np.sqrt(np.mean((2.5 * np.log10(np.maximum(value[ok], 1e-300) / reference[ok])) ** 2)))
-
-
-def timed(function, repeats=1):
-    """(result, median wall seconds, median CPU seconds of this process)."""
-    walls, cpus, result = [], [], None
-    for _ in range(repeats):
-        wall, cpu = time.perf_counter(), time.process_time()
-        result = function()
-        walls.append(time.perf_counter() - wall)
-        cpus.append(time.process_time() - cpu)
-    return result, float(np.median(walls)), float(np.median(cpus))
 
 
 def bench_model(

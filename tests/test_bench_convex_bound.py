@@ -47,3 +47,26 @@ def test_a_convex_bodys_own_facets_fit_its_curve_and_a_wrong_pole_does_not():
     assert bound.rms(truth | {"pole_dec_deg": -19.0}, everything, everything) > 0.1
     assert fibonacci_sphere(100).shape == (100, 3)
     assert np.allclose(np.linalg.norm(fibonacci_sphere(7), axis=1), 1.0)
+
+
+def test_the_torque_free_search_starts_from_the_same_motion_as_the_inertial_best():
+    from bench.convex_bound import CLIP_MAG, ConvexBound, as_torque_free, fibonacci_sphere
+
+    observed = read_file(TOPEX_PHV)[0]
+    facets = fibonacci_sphere(30)
+    inertial, tumbling = ConvexBound(observed, "inertial", facets), ConvexBound(observed, "torque_free", facets)
+    values = {"spin_period_s": 9.49, "spin_phase_deg": 75.0, "pole_ra_deg": 139.0, "pole_dec_deg": -65.0}
+    everything = inertial.usable
+    same = as_torque_free(values)
+    assert tumbling.rms(same, everything, everything) == pytest.approx(
+        inertial.rms(values, everything, everything), abs=1e-9
+    )
+    # The frames themselves agree, not only the fitted residual.
+    body_i = inertial.geometry.body_frame(inertial.model.attitude_model(values))
+    body_t = tumbling.geometry.body_frame(tumbling.model.attitude_model(same))
+    assert np.abs(body_i.sun_body - body_t.sun_body).max() < 1e-9
+    # Tilting the angular velocity off the principal axis is another motion: another fit.
+    wobbling = same | {"omega_polar_deg": 20.0}
+    assert abs(tumbling.rms(wobbling, everything, everything) - tumbling.rms(same, everything, everything)) > 0.01
+    # Moments no rigid body has (one larger than the other two together) are refused.
+    assert tumbling.rms(same | {"inertia_ratio_3": 4.0}, everything, everything) == CLIP_MAG
