@@ -122,18 +122,30 @@ def search(bound: ConvexBound, names, ranges, fit_rows, seed: int, maxiter: int,
     """(best values, their RMS on `fit_rows`, evaluations) of differential evolution over the attitude.
 
     `start` (values by name), when given, is one member of the first generation, the others a Latin
-    hypercube over the ranges: the search then ends no worse than that start."""
+    hypercube over the ranges: the search then ends no worse than that start. Its trials are then
+    mutations of random members (``rand1bin``), not of the best (scipy's default ``best1bin``):
+    from a start far better than the rest, best1bin turns the whole population to the start within
+    a few generations and explores nothing else (tried: the torque-free search ended on its start)."""
 
     def cost(x):
         return bound.rms(dict(zip(names, x)), fit_rows, fit_rows)
 
-    init = "latinhypercube"
+    init, strategy = "latinhypercube", "best1bin"
     if start is not None:
+        strategy = "rand1bin"
         low, high = np.array(ranges, dtype=float).T
         init = low + qmc.LatinHypercube(d=len(names), seed=seed).random(POPSIZE * len(names)) * (high - low)
         init[0] = [start[name] for name in names]
     found = differential_evolution(
-        cost, ranges, popsize=POPSIZE, maxiter=maxiter, seed=seed, polish=False, tol=1e-4, init=init
+        cost,
+        ranges,
+        strategy=strategy,
+        popsize=POPSIZE,
+        maxiter=maxiter,
+        seed=seed,
+        polish=False,
+        tol=1e-4,
+        init=init,
     )
     return dict(zip(names, found.x)), float(found.fun), int(found.nfev)
 
@@ -223,7 +235,7 @@ project's BRDFs), their areas non-negative and fitted by least squares on the re
 attitude; the attitude by differential evolution (spin period within +-1% of the period search's
 {period:.4f} s). No facet shadows another, so the fit is the search's best: an upper bound on what the best
 convex body spinning this way leaves (differential evolution, {POPSIZE} x parameters x {args.maxiter} generations; the torque-free
-search starts from the inertial one's best, a special case of it).
+search starts from the inertial one's best, a special case of it, and mutates random members).
 Held out: the last {args.holdout:.0%} of the pass, the areas and attitude fitted on the rest.
 
 | attitude | facets | RMS over every sample (mag) | fitted part (mag) | held out (mag) | whole-pass attitude |
