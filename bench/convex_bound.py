@@ -181,11 +181,16 @@ def main(argv=None) -> int:
     rows = []
     # Best attitudes by (family, facets, part of the pass): a torque-free search starts from the
     # inertial one (a special case of it), found first where not asked for.
-    best = {}
+    best, bounds = {}, {}
+
+    def bound_of(attitude, n):
+        if (attitude, n) not in bounds:
+            bounds[attitude, n] = ConvexBound(observed, attitude, fibonacci_sphere(n))
+        return bounds[attitude, n]
 
     def searched(attitude, n, part, rows_):
         if (attitude, n, part) not in best:
-            bound = ConvexBound(observed, attitude, fibonacci_sphere(n))
+            bound = bound_of(attitude, n)
             names = ["spin_period_s", *RANGES[attitude]]
             ranges = [(0.99 * period, 1.01 * period), *RANGES[attitude].values()]
             start = as_torque_free(searched("inertial", n, part, rows_)[0]) if attitude == "torque_free" else None
@@ -196,7 +201,7 @@ def main(argv=None) -> int:
         if attitude not in RANGES:
             raise SystemExit(f"--attitudes: {attitude!r} is not one of {', '.join(RANGES)}")
         for n in (int(v) for v in args.facets.split(",")):
-            bound = ConvexBound(observed, attitude, fibonacci_sphere(n))
+            bound = bound_of(attitude, n)
             started = time.perf_counter()
             values, whole, evaluations = searched(attitude, n, "whole", bound.usable)
             row = {"attitude": attitude, "facets": n, "whole_rms": whole, "whole": values, "evaluations": evaluations}
