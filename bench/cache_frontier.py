@@ -102,7 +102,10 @@ def main(argv=None) -> int:
         last = latest("cache_frontier")
         if last is None:
             raise SystemExit(f"no cache_frontier run in {HISTORY}; run the benchmark first")
-        chart(last["data"], last["section"].split("Scene `")[1].split("`")[0], CHART)
+        rows = last["data"]
+        # The first recorded run's rows lack the scene: its section's text names it.
+        scene = rows[0].get("scene") or last["section"].split("Scene `")[1].split("`")[0]
+        chart(rows, scene, CHART)
         return 0
     from raycast.cycles.comparison import DARK_FRACTION, comparison_scenes, mag_difference, tumble_frames
     from raycast.renderer.cache import SceneCache
@@ -120,6 +123,7 @@ def main(argv=None) -> int:
         error = mag_difference(values, reference)
         error = error[np.isfinite(error)]
         row = {
+            "scene": args.scene,
             "setting": text,
             "options": options,
             "classes": int(cache.poses[0].n_classes),
