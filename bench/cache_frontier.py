@@ -14,7 +14,8 @@ issue's target (<= 20 ms, <= 0.01 mag) as a box.
 
 A setting is ``default`` or options joined by commas: ``bins=`` (normal_bins_per_step),
 ``elements=`` (element_size_m, as a fraction of the mesh radius written ``r/40`` or metres),
-``step=`` (normal_step_deg).
+``step=`` (normal_step_deg), ``grid=`` (grid_size, the visibility's cube map: a finer grid leaves fewer
+element-direction pairs for exact rays), ``edge=`` (edge_rays_per_side).
 """
 
 from __future__ import annotations
@@ -34,7 +35,15 @@ from bench.render import MODELS  # noqa: E402
 CHART = ROOT / "docs" / "img" / "cache_frontier.png"
 SETTINGS = "default;bins=1;elements=r/40,bins=1;elements=r/30,bins=1;elements=r/30,bins=2;elements=r/30,bins=1,step=6"
 TARGET_MS, TARGET_MAG = 20.0, 0.01
-OPTIONS = {"bins": "normal_bins_per_step", "elements": "element_size_m", "step": "normal_step_deg"}
+OPTIONS = {
+    "bins": "normal_bins_per_step",
+    "elements": "element_size_m",
+    "step": "normal_step_deg",
+    "grid": "grid_size",
+    "edge": "edge_rays_per_side",
+}
+# Options that count something: whole numbers.
+COUNTS = ("grid", "edge")
 
 
 def parse_setting(text: str, radius_m: float) -> dict:
@@ -49,6 +58,10 @@ def parse_setting(text: str, radius_m: float) -> dict:
             raise SystemExit(f"--settings: {part!r} is not one of {', '.join(k + '=' for k in OPTIONS)} with a value")
         if key == "elements" and value.startswith("r/"):
             options[OPTIONS[key]] = radius_m / float(value[2:])
+        elif key in COUNTS:
+            if not value.isdigit() or int(value) < 1:
+                raise SystemExit(f"--settings: {part!r}: {key} takes a whole number of at least 1")
+            options[OPTIONS[key]] = int(value)
         else:
             options[OPTIONS[key]] = float(value)
     return options

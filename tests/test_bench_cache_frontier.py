@@ -11,8 +11,15 @@ def test_settings_read_as_build_options():
     assert parse_setting("default", 8.0) == {}
     assert parse_setting("elements=r/40,bins=1", 8.0) == {"element_size_m": 0.2, "normal_bins_per_step": 1.0}
     assert parse_setting("elements=0.3,step=6", 8.0) == {"element_size_m": 0.3, "normal_step_deg": 6.0}
-    with pytest.raises(SystemExit, match="'grid=48' is not one of bins=, elements=, step="):
-        parse_setting("grid=48", 8.0)
+    assert parse_setting("grid=64,edge=2,bins=1", 8.0) == {
+        "grid_size": 64,
+        "edge_rays_per_side": 2,
+        "normal_bins_per_step": 1.0,
+    }
+    with pytest.raises(SystemExit, match="'size=48' is not one of bins=, elements=, step=, grid=, edge="):
+        parse_setting("size=48", 8.0)
+    with pytest.raises(SystemExit, match="'grid=4.5': grid takes a whole number"):
+        parse_setting("grid=4.5", 8.0)
 
 
 def test_a_run_on_the_plate_prints_every_setting_and_its_error(capsys):

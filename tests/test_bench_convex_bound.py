@@ -70,3 +70,45 @@ def test_the_torque_free_search_starts_from_the_same_motion_as_the_inertial_best
     assert abs(tumbling.rms(wobbling, everything, everything) - tumbling.rms(same, everything, everything)) > 0.01
     # Moments no rigid body has (one larger than the other two together) are refused.
     assert tumbling.rms(same | {"inertia_ratio_3": 4.0}, everything, everything) == CLIP_MAG
+
+
+def test_areas_refitted_at_a_found_attitude_score_each_part_as_the_search_did():
+    from bench.convex_bound import ConvexBound, fibonacci_sphere, refitted
+
+    observed = read_file(TOPEX_PHV)[0]
+    coarse, fine = (
+        ConvexBound(observed, "inertial", fibonacci_sphere(20)),
+        ConvexBound(observed, "inertial", fibonacci_sphere(80)),
+    )
+    everything = coarse.usable
+    cut = np.arange(len(observed)) < int(0.7 * len(observed))
+    train, held = everything & cut, everything & ~cut
+    found = {
+        "whole": {"spin_period_s": 9.49, "spin_phase_deg": 75.0, "pole_ra_deg": 139.0, "pole_dec_deg": -65.0},
+        "train": {"spin_period_s": 9.50, "spin_phase_deg": 10.0, "pole_ra_deg": 200.0, "pole_dec_deg": -40.0},
+    }
+    same = refitted(coarse, found, everything, train, held)
+    assert same["whole_rms"] == pytest.approx(coarse.rms(found["whole"], everything, everything), abs=1e-12)
+    assert same["train_rms"] == pytest.approx(coarse.rms(found["train"], train, train), abs=1e-12)
+    # Held out: the training part's attitude and areas, scored on the rest.
+    assert same["heldout_rms"] == pytest.approx(coarse.rms(found["train"], train, held), abs=1e-12)
+    assert same["heldout_rms"] != pytest.approx(coarse.rms(found["whole"], train, held), abs=1e-3)
+    # Four times the facets fit the same pass at the same attitude more closely.
+    finer = refitted(fine, found, everything, train, held)
+    assert finer["whole_rms"] < same["whole_rms"] - 0.02
+    # Without a held-out part only the whole pass is scored.
+    assert set(refitted(coarse, found, everything)) == {"whole_rms", "whole"}
+
+
+def test_a_ridge_damps_the_areas_and_costs_fit():
+    from bench.convex_bound import ConvexBound, fibonacci_sphere
+
+    observed = read_file(TOPEX_PHV)[0]
+    values = {"spin_period_s": 9.49, "spin_phase_deg": 75.0, "pole_ra_deg": 139.0, "pole_dec_deg": -65.0}
+    plain, damped = (ConvexBound(observed, "inertial", fibonacci_sphere(40), ridge=r) for r in (0.0, 0.1))
+    everything = plain.usable
+    design = plain.design(values)
+    free, shrunk = plain.fit_areas(design, everything), damped.fit_areas(design, everything)
+    assert np.all(shrunk >= 0.0)
+    assert np.linalg.norm(shrunk) < 0.9 * np.linalg.norm(free)
+    assert damped.rms(values, everything, everything) > plain.rms(values, everything, everything) + 0.01
