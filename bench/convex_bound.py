@@ -207,7 +207,11 @@ def chart(rows: list[dict], naive_mag: float | None, name: str, path: Path) -> N
     series = {}
     for family in dict.fromkeys(r["attitude"] for r in rows):
         mine = sorted((r for r in rows if r["attitude"] == family), key=lambda r: r["facets"])
-        key = tuple((r["facets"], r["whole_rms"], r.get("train_rms"), r.get("heldout_rms")) for r in mine)
+        # To a micro-magnitude: the torque-free translation of an inertial spin agrees to 1e-9, not bit for bit.
+        key = tuple(
+            (r["facets"], *(round(r[k], 6) if k in r else None for k in ("whole_rms", "train_rms", "heldout_rms")))
+            for r in mine
+        )
         series.setdefault(key, []).append(family)
     families = [" = ".join(names) for names in series.values()]
     styles = {
