@@ -362,7 +362,7 @@ def main(argv=None) -> int:
     ]
     refit_text = (
         f"\nRows marked (refit): finer spheres of facets, their areas fitted again at the attitudes the {counts[-1]}-facet"
-        " search found for each part (not searched again: a search could only lower their fitted RMS)"
+        " search found for each part (not searched again: their own best attitudes would fit them at least as well)"
         + (f", their areas damped (ridge {args.ridge:g}, ConvexBound.fit_areas)." if args.ridge else ".")
         if args.refit_facets
         else ""
