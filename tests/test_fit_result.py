@@ -301,3 +301,22 @@ def test_the_trust_table_names_what_keeps_a_long_chain_from_converging():
     )
     reasons = assess(fit, SimpleNamespace(verdict="confident", best_period_s=9.5, uncertainty_s=0.001)).reasons
     assert reasons[0] == "chain not converged (mean acceptance 0.13 is outside 0.15-0.7)"
+
+
+def test_the_table_tells_the_samples_the_likelihood_saw_from_those_between_them(fitted):
+    _, _, _, result = fitted
+    # Every other 10 s seen, the model exact there and 0.3 mag off between.
+    seen = (result.t_s // 10.0).astype(int) % 2 == 0
+    rung = replace(result, fitted=seen, mag_model=result.mag_obs - np.where(seen, 0.0, 0.3))
+    seen_rms, unseen_rms = rung.residual_rms_by_sight()
+    assert seen_rms == pytest.approx(0.0, abs=1e-12)
+    assert unseen_rms == pytest.approx(0.3, rel=1e-9)
+    lines = [line for line in rung.table().splitlines() if "likelihood saw" in line]
+    assert lines == [
+        f"  of which 0.000 mag over the {int(seen.sum())} samples the likelihood saw, "
+        f"0.300 over the {int((~seen).sum())} between them it did not"
+    ]
+    assert rung.to_dict()["residual_rms_unseen_mag"] == pytest.approx(0.3, rel=1e-9)
+    # A fit that saw every sample of its window says nothing of the kind.
+    assert "likelihood saw" not in result.table()
+    assert result.to_dict()["residual_rms_unseen_mag"] is None

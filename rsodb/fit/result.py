@@ -379,6 +379,20 @@ class FitResult:
     def n_window(self) -> int:
         return int(np.sum(self.in_window))
 
+    def residual_rms_by_sight(self) -> tuple[float, float]:
+        """(seen, unseen): the best fit's residual RMS, mag, over the window's samples the
+        likelihood saw (``fitted``) and over those it did not (NaN where there are none).
+
+        A fit of a long pass sees ``max_points`` samples in windows spread over it
+        (rsodb.fit.selection); the samples between them are an in-pass held-out set. An unseen RMS
+        well above the seen one says the model follows its own samples better than the pass."""
+        residuals = self.residuals_mag
+
+        def rms(mask):
+            return float(np.sqrt(np.mean(residuals[mask] ** 2))) if mask.any() else math.nan
+
+        return rms(self.in_window & self.fitted), rms(self.in_window & ~self.fitted)
+
     def values(self, which: str = "median") -> dict[str, float]:
         """``{name: value}`` of `which` (``median``, ``best``, ``p16``, ``p84``) plus fixed values."""
         if which not in ("median", "best", "p16", "p84"):
@@ -410,6 +424,13 @@ class FitResult:
             f"reduced chi2 {self.reduced_chi2:.2f} (observed errors), jitter {self.jitter_mag:.3f} mag, "
             f"offset {self.offset_mag:+.3f} mag"
         )
+        unseen = self.in_window & ~self.fitted
+        if unseen.any():
+            seen_rms, unseen_rms = self.residual_rms_by_sight()
+            rows.append(
+                f"  of which {seen_rms:.3f} mag over the {int(np.sum(self.in_window & self.fitted))} samples the "
+                f"likelihood saw, {unseen_rms:.3f} over the {int(np.sum(unseen))} between them it did not"
+            )
         rows.append(self.verdict)
         rows.extend(f"warning: {flag}" for flag in self.flags)
         return "\n".join(rows)
@@ -460,6 +481,10 @@ class FitResult:
             "offset_mag": self.offset_mag,
             "jitter_mag": self.jitter_mag,
             "residual_rms_mag": self.residual_rms_mag,
+            **{
+                f"residual_rms_{part}_mag": None if math.isnan(value) else value
+                for part, value in zip(("seen", "unseen"), self.residual_rms_by_sight())
+            },
             "chi2": self.chi2,
             "dof": self.dof,
             "reduced_chi2": self.reduced_chi2,
