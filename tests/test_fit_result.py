@@ -19,6 +19,7 @@ from rsodb.fit.parameters import ParameterSpace
 from rsodb.fit.priors import Uniform
 from rsodb.fit.result import FitResult, assess_convergence, prior_bound_flags
 from rsodb.fit.runner import FitProblem, fit_pass
+from rsodb.report.fit_report import _table
 from rsodb.report.trust import assess
 from tests.conftest import TOPEX_PHV
 
@@ -320,3 +321,8 @@ def test_the_table_tells_the_samples_the_likelihood_saw_from_those_between_them(
     # A fit that saw every sample of its window says nothing of the kind.
     assert "likelihood saw" not in result.table()
     assert result.to_dict()["residual_rms_unseen_mag"] is None
+    # The campaign report's table has the column: the RMS between the fit's samples, or "-".
+    table = _table([rung, result], {})
+    column = table.columns.index("RMS between the fit's samples [mag]")
+    assert [row[column] for row in table.rows] == ["0.300", "-"]
+    assert column in table.numeric

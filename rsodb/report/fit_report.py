@@ -143,6 +143,7 @@ def _table(results, periods_by_id) -> Table:
                 spin,
                 periodogram,
                 _cell(r.residual_rms_mag, ".3f"),
+                _cell(r.residual_rms_by_sight()[1], ".3f"),
                 _cell(r.reduced_chi2, ".2f"),
                 _cell(r.jitter_mag, ".3f"),
                 "yes" if r.converged else "no",
@@ -158,6 +159,7 @@ def _table(results, periods_by_id) -> Table:
             "spin period fit [s]",
             "periodogram [s]",
             "resid. RMS [mag]",
+            "RMS between the fit's samples [mag]",
             "red. chi2",
             "jitter [mag]",
             "converged",
@@ -165,7 +167,7 @@ def _table(results, periods_by_id) -> Table:
             "trust",
         ),
         tuple(rows),
-        numeric=frozenset({2, 5, 6, 7}),
+        numeric=frozenset({2, 5, 6, 7, 8}),
         sortable=True,
     )
 
