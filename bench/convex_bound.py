@@ -187,9 +187,8 @@ def naive_heldout_rms(observed, usable: np.ndarray, train: np.ndarray, held: np.
     light-curve periods earlier (rsodb.campaign.ladder.naive_forecast, the ladder's yardstick)."""
     from rsodb.campaign.ladder import naive_forecast
 
-    t_s = (observed.time_utc - observed.time_utc[0]) / np.timedelta64(1, "s")
     mag = np.asarray(observed.best_mag, dtype=float)
-    _, residuals = naive_forecast(t_s[usable], mag[usable], train[usable], held[usable], period_s)
+    _, residuals = naive_forecast(observed.t_s[usable], mag[usable], train[usable], held[usable], period_s)
     return float(np.sqrt(np.mean(residuals**2)))
 
 
@@ -213,15 +212,13 @@ def chart(rows: list[dict], naive_mag: float | None, name: str, path: Path) -> N
             for r in mine
         )
         series.setdefault(key, []).append(family)
-    families = [" = ".join(names) for names in series.values()]
     styles = {
         "whole_rms": ("-", "o", "whole pass"),
         "train_rms": (":", ".", "fitted part"),
         "heldout_rms": ("--", "s", "held out"),
     }
-    for i, family in enumerate(families):
-        first = family.split(" = ")[0]
-        mine = sorted((r for r in rows if r["attitude"] == first), key=lambda r: r["facets"])
+    for i, names in enumerate(series.values()):
+        mine = sorted((r for r in rows if r["attitude"] == names[0]), key=lambda r: r["facets"])
         for key, (line, marker, label) in styles.items():
             if all(key in r for r in mine):
                 axis.plot(
@@ -230,7 +227,7 @@ def chart(rows: list[dict], naive_mag: float | None, name: str, path: Path) -> N
                     line,
                     marker=marker,
                     color=f"C{i}",
-                    label=f"{family}, {label}",
+                    label=f"{' = '.join(names)}, {label}",
                 )
     axis.axhline(0.30, color="0.3", lw=1, label="target, whole pass (0.30)")
     axis.axhline(0.35, color="0.3", lw=1, ls="--", label="target, held out (0.35)")
@@ -341,13 +338,14 @@ def main(argv=None) -> int:
             started = time.perf_counter()
             finer = ConvexBound(observed, attitude, fibonacci_sphere(n), ridge=args.ridge)
             row = {"attitude": attitude, "facets": n, "refit_of": counts[-1], "ridge": args.ridge}
-            row |= refitted(finer, found, finer.usable, *((finer.usable & cut, finer.usable & ~cut) if parts else ()))
+            # Every bound of the pass has the same usable samples, so the same parts.
+            row |= refitted(finer, found, finer.usable, *parts)
             row["seconds"] = time.perf_counter() - started
             rows.append(row)
             report(row, len(finer.brdfs), args.holdout)
     naive = None
-    if args.holdout > 0:
-        naive = naive_heldout_rms(observed, bound.usable, bound.usable & cut, bound.usable & ~cut, period)
+    if parts:
+        naive = naive_heldout_rms(observed, bound.usable, *parts, period)
         print(f"no model (the last training cycle repeated): held out {naive:.3f} mag RMS")
     if args.no_record:
         return 0

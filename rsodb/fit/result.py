@@ -424,12 +424,12 @@ class FitResult:
             f"reduced chi2 {self.reduced_chi2:.2f} (observed errors), jitter {self.jitter_mag:.3f} mag, "
             f"offset {self.offset_mag:+.3f} mag"
         )
-        unseen = self.in_window & ~self.fitted
-        if unseen.any():
-            seen_rms, unseen_rms = self.residual_rms_by_sight()
+        seen_rms, unseen_rms = self.residual_rms_by_sight()
+        if not math.isnan(unseen_rms):
+            n_seen = int(np.sum(self.in_window & self.fitted))
             rows.append(
-                f"  of which {seen_rms:.3f} mag over the {int(np.sum(self.in_window & self.fitted))} samples the "
-                f"likelihood saw, {unseen_rms:.3f} over the {int(np.sum(unseen))} between them it did not"
+                f"  of which {seen_rms:.3f} mag over the {n_seen} samples the likelihood saw, "
+                f"{unseen_rms:.3f} over the {self.n_window - n_seen} between them it did not"
             )
         rows.append(self.verdict)
         rows.extend(f"warning: {flag}" for flag in self.flags)
