@@ -143,6 +143,8 @@ def cycles_config(axis: str, args=None) -> dict:
         config["model"]["grid_size"] = args.cache_grid_size
     if args.cache_element_size_m:
         config["model"]["element_size_m"] = args.cache_element_size_m
+    if args.cache_normal_bins:
+        config["model"]["normal_bins_per_step"] = args.cache_normal_bins
     if args.correlation_time_s:  # (only when asked: the default likelihood is as it was)
         config["likelihood"] = {"correlation_time_s": args.correlation_time_s}
     if args.flux_error:
@@ -438,6 +440,8 @@ def forward_model_at_truth(directory: Path, records: list[dict], argv, args) -> 
     by_axis = {axis: float(np.median([row[1] for row in rows if row[0]["axis"] == axis])) for axis in axes}
     fit_by_axis = {axis: float(np.median([row[5] for row in rows if row[0]["axis"] == axis])) for axis in axes}
     variant = f", elements up to {cache_element_mm:.0f} mm" if args.cache_element_size_m else ""
+    if args.cache_normal_bins:
+        variant += f", {args.cache_normal_bins:g} normal bins a step"
     section = f"""
 ## The fit's forward model against Cycles at the true state{variant} ({today()}, bench/fit_coverage.py --cycles --at-truth)
 
@@ -475,7 +479,7 @@ Reproduce: `{command("fit_coverage.py", argv)}`.
         f"fit_forward_vs_cycles_elements_{cache_element_mm:.0f}mm"
         if args.cache_element_size_m
         else "fit_forward_vs_cycles"
-    )
+    ) + (f"_normal_bins_{args.cache_normal_bins:g}" if args.cache_normal_bins else "")
     record(name, command("fit_coverage.py", argv), figures, section)
     return 0
 
@@ -867,6 +871,8 @@ def forward_model_text(args) -> str:
         settings.append(f"surface elements up to {1000 * args.cache_element_size_m:.0f} mm (`[model] element_size_m`)")
     if args.cache_grid_size:
         settings.append(f"a {args.cache_grid_size}-node direction grid")
+    if args.cache_normal_bins:
+        settings.append(f"shading classes of {args.cache_normal_bins:g} a normal step (`[model] normal_bins_per_step`)")
     if args.cache_accuracy_mag:
         settings.append(f"a cache accuracy of {args.cache_accuracy_mag:g} mag")
     if args.correlation_time_s:
@@ -989,6 +995,12 @@ def command_line() -> argparse.ArgumentParser:
         type=float,
         default=0.0,
         help="the fit's cached renderer: largest element (default 0: its own, the mesh radius / 30)",
+    )
+    cycles.add_argument(
+        "--cache-normal-bins",
+        type=float,
+        default=0.0,
+        help="the fit's cached renderer: shading classes per normal step (default 0: its own, 3)",
     )
     return parser
 

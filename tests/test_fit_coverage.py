@@ -129,7 +129,7 @@ def test_cycles_fit_configuration_takes_any_callers_settings():
     exist, and bench/fit.py passes only its own: both must make a valid configuration."""
     import argparse
 
-    from bench.fit_coverage import PAPER_OBJ, command_line, cycles_config
+    from bench.fit_coverage import PAPER_OBJ, command_line, cycles_config, forward_model_text
 
     bare = FitConfig.from_dict(cycles_config("x"))
     assert bare.parameter_space({}).names[:3] == ("spin_period_s", "spin_phase_deg", "precession_period_s")
@@ -152,6 +152,11 @@ def test_cycles_fit_configuration_takes_any_callers_settings():
     assert (sharper.model.grid_size, sharper.model.accuracy_mag) == (0, 0.005)
     smaller = FitConfig.from_dict(cycles_config("x", command_line().parse_args(["--cache-element-size-m", "0.146"])))
     assert (smaller.model.element_size_m, finer.model.element_size_m) == (0.146, 0.0)
+    coarser = FitConfig.from_dict(cycles_config("x", command_line().parse_args(["--cache-normal-bins", "1"])))
+    assert (coarser.model.normal_bins_per_step, finer.model.normal_bins_per_step) == (1.0, 0.0)
+    assert "shading classes of 1 a normal step" in forward_model_text(
+        command_line().parse_args(["--cache-normal-bins", "1"])
+    )
     # So do the likelihood's model-error terms.
     plain = FitConfig.from_dict(cycles_config("x", command_line().parse_args([])))
     assert not plain.likelihood.flux_error and plain.likelihood.correlation_time_s == 0

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
+import functools
 import math
 from pathlib import Path
 from types import MappingProxyType
@@ -399,13 +400,21 @@ def _block_indices(n: int, block: int, rng) -> np.ndarray:
     return (starts[:, None] + np.arange(block)).ravel()[:n]
 
 
-def _bootstrap_picks(n: int, block: int, settings) -> list[np.ndarray]:
+def _bootstrap_picks(n: int, block: int, settings) -> tuple[np.ndarray, ...]:
     """``settings.bootstrap`` moving-block resamples of n held-out samples, seeded by
-    ``settings.seed``: the same for every comparison of one ladder (a paired bootstrap)."""
+    ``settings.seed``: the same for every comparison of one ladder (a paired bootstrap), drawn
+    once for the rungs and the no-model yardstick alike."""
     # At least MIN_BLOCKS blocks, or every resample is the same block and the error reads as zero.
-    block = max(1, min(int(block), n // MIN_BLOCKS))
-    rng = np.random.default_rng(settings.seed)
-    return [_block_indices(n, block, rng) for _ in range(settings.bootstrap)]
+    return _drawn_picks(int(n), max(1, min(int(block), n // MIN_BLOCKS)), int(settings.bootstrap), settings.seed)
+
+
+@functools.lru_cache(maxsize=16)
+def _drawn_picks(n: int, block: int, count: int, seed) -> tuple[np.ndarray, ...]:
+    rng = np.random.default_rng(seed)
+    picks = tuple(_block_indices(n, block, rng) for _ in range(count))
+    for pick in picks:
+        pick.flags.writeable = False  # shared by every caller of the cache
+    return picks
 
 
 def _paired_se(residuals: np.ndarray, reference: np.ndarray, picks) -> float:
