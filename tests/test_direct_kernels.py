@@ -79,9 +79,11 @@ def test_flat_sums_add_unblocked_flat_hits_and_return_the_smooth_ones():
     smooth = np.array([False, True, False])
     table = np.arange(9, dtype=float).reshape(3, 3) + 1.0
     out = np.full(3, 0.5)
-    rest = _direct_kernels.flat_sums(frames, prim, blocked, smooth, table, out)
-    # Flat, unblocked: (0, 0) -> 1, (1, 2) -> 6, (2, 0) -> 7; the blocked (1, 0) adds nothing.
-    np.testing.assert_array_equal(out, [1.5, 6.5, 7.5])
+    share = np.array([1.0, 9.0, 9.0, 0.5, 9.0, 2.0])
+    rest = _direct_kernels.flat_sums(frames, prim, blocked, smooth, table, out, share)
+    # Flat, unblocked, times their share: (0, 0) -> 1 x 1, (1, 2) -> 6 x 0.5, (2, 0) -> 7 x 2;
+    # the blocked (1, 0) and the smooth hits add nothing.
+    np.testing.assert_array_equal(out, [1.5, 3.5, 14.5])
     np.testing.assert_array_equal(rest, [1, 4])
 
 

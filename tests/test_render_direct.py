@@ -252,8 +252,43 @@ def test_scan_conversion_finds_the_same_first_hits_as_rays(model, monkeypatch):
             counts[frame, plane[triangle]] += count
     differing = sum(abs(by_plane[0][key] - by_plane[1][key]) for key in set(by_plane[0]) | set(by_plane[1]))
     assert differing <= 1e-4 * hits
-    np.testing.assert_allclose(raster, rays, rtol=1e-4)
-    assert np.count_nonzero(raster) >= 3
+    # Each hit counted as one pixel (no exact-area share), the raster's sum is the grid's.
+    from raycast.renderer import _direct_kernels
+
+    flat_sums = _direct_kernels.flat_sums
+    monkeypatch.setattr(_direct_kernels, "flat_sums", lambda *args: flat_sums(*args[:-1], np.ones_like(args[-1])))
+    plain = DirectRenderer(scene, 0.03, sampling="raster").intensity(sun, obs)
+    np.testing.assert_allclose(plain, rays, rtol=1e-4)
+    assert np.count_nonzero(plain) >= 3
+    # With the shares the sums differ, by the pixels' sampling of flat areas only.
+    np.testing.assert_allclose(raster, rays, rtol=0.02)
+
+
+def test_raster_counts_a_flat_face_by_its_exact_area():
+    # A fully visible Lambertian plate (two triangles of 1 m^2): I/E = albedo / pi * A * cos_s *
+    # cos_o exactly. Seen face-on or nearly edge-on, wherever each triangle covers at least
+    # EXACT_SHARE_MIN_PIXELS of projected area the raster's sum is exact at any pixel size; a
+    # triangle smaller than that counts its pixels as the ray grid does.
+    from raycast.renderer._direct_kernels import EXACT_SHARE_MIN_PIXELS
+
+    scene = Scene.from_parts([Part.plate("plate", 2.0, 1.0, "paint")], {"paint": Lambertian(0.4)})
+    normal = scene.posed().face_normals[0]
+    tilt = np.radians([10.0, 80.0, 88.0, 89.0, 89.5, 89.9])
+    side = unit(np.cross(normal, [0.3, 0.5, 0.8]))
+    obs = np.cos(tilt)[:, None] * normal + np.sin(tilt)[:, None] * side
+    sun = np.tile(unit(normal + 0.4 * np.cross(normal, side)), (len(tilt), 1))
+    exact = 0.4 / math.pi * 2.0 * (sun @ normal) * np.cos(tilt)
+    errors = []
+    for pixel_m in (0.3, 0.07, 0.013):
+        raster = DirectRenderer(scene, pixel_m, sampling="raster").intensity(sun, obs)
+        grid = DirectRenderer(scene, pixel_m, sampling="grid").intensity(sun, obs)
+        large = 1.0 * np.cos(tilt) >= EXACT_SHARE_MIN_PIXELS * pixel_m**2
+        np.testing.assert_allclose(raster[large], exact[large], rtol=1e-9)
+        np.testing.assert_allclose(raster[~large], grid[~large], rtol=1e-4)
+        errors.append(np.abs(grid[large] / exact[large] - 1.0))
+    # Both kinds occur, and the exact area matters: the grid's plain sum misses by a few %.
+    assert 0 < sum(map(len, errors)) < 3 * len(tilt)
+    assert np.max(np.concatenate(errors)) > 0.02
 
 
 def test_scan_conversion_leaves_out_the_inner_sides_of_closed_parts_only():

@@ -9,6 +9,14 @@ import numpy as np
 
 from raycast.renderer.rays import SUN_RADIUS_SINE, risen_sun
 
+# A triangle's hits count as shares of its exact projected area (raster_hits) only when that
+# area is at least this many pixels: then some pixel centre falls on it whatever the grid's
+# offset (a strip of 8 pixels' area covers 8 centres on average, none with odds of about e**-8),
+# so the share has no bias. A smaller triangle can fall between the centres, and a share would
+# then drop its light in some frames and inflate it in others, on average too little; its hits
+# count a pixel each, which is right on average.
+EXACT_SHARE_MIN_PIXELS = 8.0
+
 
 @njit(cache=True, nogil=True)
 def tile_rays(tile_origin, owner, step_u, step_v, backward, tile):
@@ -131,7 +139,7 @@ def raster_hits(
     corners, pu, pv, depth, start_u, start_v, h, n_u, n_v, frames, drawn, sunward, face_normals, obs, sun, offset
 ):
     """First hits of the orthographic ray grid by scan conversion, kept where the hit side
-    faces the Sun.
+    faces the Sun, each with the share of its triangle's exact projected area it stands for.
 
     Pixel (i, j) of frame f is the ray through ``(start_u[f] + (i + 1/2) h, start_v[f] +
     (j + 1/2) h)`` in the image plane; every triangle with ``drawn[t, f]`` is scan-converted
@@ -156,6 +164,12 @@ def raster_hits(
     uv : (k, 2) float32, barycentric (u, v).
     shadow_rays : (k, 6) float32, from ``offset`` above the hit (along the face normal turned
         toward the observer) toward the Sun (the part of its disk above the face's plane).
+    share : (k,) float64, the triangle's exact projected area in pixels (h**2) divided by the
+        number of pixel centres it covers before the depth test: what each of its hits stands
+        for when the hits of a flat triangle count as the lit and seen fraction of its whole
+        area (:func:`flat_sums`). Near 1 on a large face seen face-on, far from it on a face seen
+        nearly edge-on, whose thin strip the pixel centres cover by chance. 1 for triangles under
+        ``EXACT_SHARE_MIN_PIXELS`` of projected area.
     """
     n_tri = len(corners)
     window = np.zeros((len(frames), 4), dtype=np.int64)
@@ -181,6 +195,9 @@ def raster_hits(
     prim = np.empty(capacity, dtype=np.int64)
     uv = np.empty((capacity, 2), dtype=np.float32)
     shadow_rays = np.empty((capacity, 6), dtype=np.float32)
+    share = np.empty(capacity)
+    # Per triangle, in the frame being drawn: its projected area and covered pixel centres.
+    exact, covered = np.zeros(n_tri), np.zeros(n_tri)
     nearest = np.empty(largest, dtype=np.float32)
     winner = np.empty(largest, dtype=np.int32)
     xs, ys = np.empty(3), np.empty(3)
@@ -201,6 +218,7 @@ def raster_hits(
                 xs[c] = (pu[3 * t + c, f] - start_u[f]) / h - 0.5 - i0
                 ys[c] = (pv[3 * t + c, f] - start_v[f]) / h - 0.5 - j0
             area = (xs[1] - xs[0]) * (ys[2] - ys[0]) - (xs[2] - xs[0]) * (ys[1] - ys[0])
+            exact[t], covered[t] = 0.5 * abs(area), 0.0
             if area == 0.0:
                 continue
             d0, d1, d2 = depth[3 * t, f], depth[3 * t + 1, f], depth[3 * t + 2, f]
@@ -222,6 +240,7 @@ def raster_hits(
                 last = min(int(np.floor(right)), width - 1)
                 if first > last:
                     continue
+                covered[t] += last - first + 1
                 # Barycentric (a, b) and depth are linear along the row.
                 a = ((first - xs[0]) * (ys[2] - ys[0]) - (xs[2] - xs[0]) * (j - ys[0])) / area
                 b = ((xs[1] - xs[0]) * (j - ys[0]) - (first - xs[0]) * (ys[1] - ys[0])) / area
@@ -253,6 +272,8 @@ def raster_hits(
                 a, b = a / total, b / total
             owners[count], prim[count] = f, t
             uv[count, 0], uv[count, 1] = a, b
+            # (The pixel it won is one it covers: covered[t] >= 1.)
+            share[count] = exact[t] / covered[t] if exact[t] >= EXACT_SHARE_MIN_PIXELS else 1.0
             side = 1.0
             if face_normals[t, 0] * obs[f, 0] + face_normals[t, 1] * obs[f, 1] + face_normals[t, 2] * obs[f, 2] < 0.0:
                 side = -1.0
@@ -273,13 +294,14 @@ def raster_hits(
                 )
                 shadow_rays[count, 3 + x] = direction[x]
             count += 1
-    return owners[:count], prim[:count], uv[:count], shadow_rays[:count]
+    return owners[:count], prim[:count], uv[:count], shadow_rays[:count], share[:count]
 
 
 @njit(cache=True, nogil=True)
-def flat_sums(frames, prim, blocked, smooth, flat_table, out):
+def flat_sums(frames, prim, blocked, smooth, flat_table, out, share):
     """Add the table radiance ``flat_table[frame, triangle]`` of every unblocked hit on a
-    flat-shaded triangle to ``out[frame]`` (in place); return the unblocked smooth-shaded hits."""
+    flat-shaded triangle, times its ``share`` (:func:`raster_hits`), to ``out[frame]`` (in
+    place); return the unblocked smooth-shaded hits."""
     rest = np.empty(len(frames), dtype=np.int64)
     count = 0
     for n in range(len(frames)):
@@ -290,7 +312,7 @@ def flat_sums(frames, prim, blocked, smooth, flat_table, out):
             rest[count] = n
             count += 1
         else:
-            out[frames[n]] += flat_table[frames[n], t]
+            out[frames[n]] += flat_table[frames[n], t] * share[n]
     return rest[:count]
 
 
