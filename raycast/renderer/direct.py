@@ -23,7 +23,7 @@ a flat-shaded triangle of at least a few pixels' projected area count as the lit
 fraction of its exact projected area: the fraction of the pixel centres it covers that it wins
 and that are sunlit. A face seen nearly edge-on, a strip narrower than a pixel, then adds its
 true area, where the plain sum adds a whole pixel per centre that happens to fall on it (TOPEX
-along the real pass: 0.0049 -> 0.0025 mag RMS at 3 cm, docs/renderer.md). Smaller triangles
+along the real pass: 0.0058 -> 0.0022 mag RMS at 2 cm, docs/renderer.md). Smaller triangles
 count a pixel per hit (``_direct_kernels.EXACT_SHARE_MIN_PIXELS``).
 
 The pixel grid of each direction pair is shifted by a low-discrepancy (R2) sub-pixel offset, so
