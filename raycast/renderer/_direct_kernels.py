@@ -12,9 +12,9 @@ from raycast.renderer.rays import SUN_RADIUS_SINE, risen_sun
 # A triangle's hits count as shares of its exact projected area (raster_hits) only when that
 # area is at least this many pixels: then some pixel centre falls on it whatever the grid's
 # offset (a compact triangle surely; a strip of 8 pixels' area covers 8 centres on average,
-# none with odds of about e**-8), so the share's bias is negligible. A smaller triangle can fall between the centres, and a share would
-# then drop its light in some frames and inflate it in others, on average too little; its hits
-# count a pixel each, which is right on average.
+# none with odds of about e**-8), so the share's bias is negligible. A smaller triangle can fall
+# between the centres, and a share would then drop its light in some frames and inflate it in
+# others, on average too little; its hits count a pixel each, which is right on average.
 EXACT_SHARE_MIN_PIXELS = 8.0
 
 

@@ -408,7 +408,9 @@ def _bootstrap_picks(n: int, block: int, settings) -> tuple[np.ndarray, ...]:
     return _drawn_picks(int(n), max(1, min(int(block), n // MIN_BLOCKS)), int(settings.bootstrap), settings.seed)
 
 
-@functools.lru_cache(maxsize=16)
+# One draw kept: a ladder's rungs and its yardstick ask for it back to back (score_ladder), and a
+# campaign of many passes would otherwise hold a few MB of resamples per pass for nothing.
+@functools.lru_cache(maxsize=1)
 def _drawn_picks(n: int, block: int, count: int, seed) -> tuple[np.ndarray, ...]:
     rng = np.random.default_rng(seed)
     picks = tuple(_block_indices(n, block, rng) for _ in range(count))
