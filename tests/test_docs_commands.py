@@ -79,6 +79,11 @@ def shown_commands(path: Path) -> list[tuple[int, str]]:
     return commands
 
 
+def bare(command: str) -> str:
+    """A shown command without its trailing ``  # comment``."""
+    return command.split("  #")[0].strip()
+
+
 def _toml(record: dict, prefix: str = "") -> str:
     """A TOML text of a configuration record (tables, strings, numbers, booleans, inline tables)."""
 
@@ -116,9 +121,9 @@ def test_the_docs_show_commands():
 
 
 def test_commands_left_to_the_readme_are_the_readmes_own():
-    readme = {c.split("  #")[0].strip() for _, c in shown_commands(PROJECT_ROOT / "README.md")}
+    readme = {bare(c) for _, c in shown_commands(PROJECT_ROOT / "README.md")}
     for name, commands in SHOWN_IN_README.items():
-        shown = [c.split("  #")[0].strip() for _, c in shown_commands(PROJECT_ROOT / "docs" / name)]
+        shown = [bare(c) for _, c in shown_commands(PROJECT_ROOT / "docs" / name)]
         shown = [c for c in shown if c not in COVERED]
         assert commands <= readme and set(shown[-len(commands) :]) == commands, name
 
@@ -172,9 +177,9 @@ def workdir(tmp_path_factory, shared_data, shared_shapes):
 def test_shown_commands_run(path, workdir, tmp_path):
     if path.name in RUN_BY_HAND:
         pytest.skip(f"{path.name}: {RUN_BY_HAND[path.name]}")
-    commands = [(n, c) for n, c in shown_commands(path) if c.split("  #")[0].strip() not in COVERED]
+    commands = [(n, c) for n, c in shown_commands(path) if bare(c) not in COVERED]
     again = SHOWN_IN_README.get(path.name, set())
-    while commands and commands[-1][1].split("  #")[0].strip() in again:
+    while commands and bare(commands[-1][1]) in again:
         commands.pop()  # only trailing ones: nothing after them in the file depends on them
     if not commands:
         pytest.skip(f"{path.name} shows no command to run here")
