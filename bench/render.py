@@ -254,8 +254,10 @@ def chart(results, path):
 
 # (method, accuracy target in mag, time target per 150-frame light curve in s), from the renderer's
 # specification: the fast path <= 20 ms at <= 0.01 mag, the direct renderer <= 1 s at <= 0.005 mag,
-# both at least 100x faster than Cycles at equal accuracy.
+# both at least CYCLES_RATIO_TARGET times less CPU than Cycles at equal accuracy (the renderer
+# issue's target), against the project's aim of a hundred times and more (CYCLES_RATIO_AIM).
 TARGETS = (("cached", 0.01, 0.02), ("direct", 0.005, 1.0))
+CYCLES_RATIO_TARGET, CYCLES_RATIO_AIM = 20.0, 100.0
 # Monte Carlo error falls as samples**-1/2, so time grows as error**-2 beyond Cycles' measured range.
 CYCLES_TIME_ERROR_SLOPE = -2.0
 
@@ -315,8 +317,15 @@ def verdict(rows, method, target_mag, target_s):
             text += f", Cycles never reached {best['error_mag']:.4f} mag (best {cycles_best:.4f}): > {ratio:.0f}x"
         else:
             text += f", Cycles at equal accuracy ({how}) {cycles_s:.1f} s CPU: {ratio:.0f}x"
-            text += " (meets 100x)" if ratio >= 100 else " (MISSES 100x)"
+            text += f" ({ratio_verdict(ratio)})"
     return text
+
+
+def ratio_verdict(ratio):
+    """Whether a speed ratio against Cycles meets the target, and where it stands to the aim."""
+    met = "meets" if ratio >= CYCLES_RATIO_TARGET else "MISSES"
+    aim = "" if ratio >= CYCLES_RATIO_AIM else f", under the {CYCLES_RATIO_AIM:g}x aim"
+    return f"{met} {CYCLES_RATIO_TARGET:g}x{aim}"
 
 
 def headline_figures(results):
@@ -336,7 +345,13 @@ def headline_figures(results):
                 value = f"MISSES {target_mag} mag: best {best['error_mag']:.4f} mag in {time_text}"
             limit = f"{1e3 * target_s:g} ms" if target_s < 1 else f"{target_s:g} s"
             name = "fast path" if method == "cached" else "direct renderer"
-            figures.append(figure(f"{model} {name}", value, f"<= {limit} CPU at <= {target_mag} mag; >= 100x Cycles"))
+            figures.append(
+                figure(
+                    f"{model} {name}",
+                    value,
+                    f"<= {limit} CPU at <= {target_mag} mag; >= {CYCLES_RATIO_TARGET:g}x Cycles",
+                )
+            )
     return figures
 
 

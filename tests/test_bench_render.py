@@ -44,3 +44,23 @@ def test_the_normal_options_reach_the_build_and_name_the_rows():
     assert cache_label(options, title=True) == ["shading classes 1 per normal step"]
     assert traced_build(plate, 4, element_size_m=0.2)[0].element_size_m == 0.2
     assert cache_label({"element_size_m": 0.2}) == ["elements 0.2 m"]
+
+
+def test_the_verdict_judges_the_cycles_ratio_by_the_target_and_names_the_aim():
+    from bench.render import verdict
+
+    def rows(cycles_cpu_s):
+        # The direct renderer at 0.004 mag in 0.1 s; Cycles from 0.02 to 0.002 mag, its time
+        # at 0.004 mag interpolated log-log between its two settings.
+        direct = {"method": "direct", "setting": "r/150", "error_mag": 0.004, "cpu_s": 0.1, "wall_s": 0.06}
+        cycles = [
+            {"method": "cycles", "setting": "4 spp", "error_mag": 0.02, "cpu_s": cycles_cpu_s / 10, "wall_s": 1.0},
+            {"method": "cycles", "setting": "64 spp", "error_mag": 0.002, "cpu_s": cycles_cpu_s * 2, "wall_s": 1.0},
+        ]
+        return [direct, *cycles]
+
+    # Cycles' time at 0.004 mag, log-log between (0.002 mag, 2c) and (0.02 mag, c / 10):
+    # 2c * 0.05**(log 2 / log 10) = 0.81c, so the ratio is 8.1c.
+    assert "meets 20x, under the 100x aim" in verdict(rows(5.0), "direct", 0.005, 1.0)  # 40x
+    assert verdict(rows(50.0), "direct", 0.005, 1.0).endswith(": 406x (meets 20x)")
+    assert "MISSES 20x" in verdict(rows(1.0), "direct", 0.005, 1.0)  # 8x
