@@ -252,11 +252,13 @@ def test_scan_conversion_finds_the_same_first_hits_as_rays(model, monkeypatch):
             counts[frame, plane[triangle]] += count
     differing = sum(abs(by_plane[0][key] - by_plane[1][key]) for key in set(by_plane[0]) | set(by_plane[1]))
     assert differing <= 1e-4 * hits
-    # Each hit counted as one pixel (no exact-area share), the raster's sum is the grid's.
+    # Each hit counted as one pixel (no exact-area share, no sampling of small triangles on
+    # their own surface), the raster's sum is the grid's.
     from raycast.renderer import _direct_kernels
 
     flat_sums = _direct_kernels.flat_sums
     monkeypatch.setattr(_direct_kernels, "flat_sums", lambda *args: flat_sums(*args[:-1], np.ones_like(args[-1])))
+    monkeypatch.setattr(DirectRenderer, "_small_flat_sums", lambda *args: None)
     plain = DirectRenderer(scene, 0.03, sampling="raster").intensity(sun, obs)
     np.testing.assert_allclose(plain, rays, rtol=1e-4)
     assert np.count_nonzero(plain) >= 3
@@ -264,11 +266,12 @@ def test_scan_conversion_finds_the_same_first_hits_as_rays(model, monkeypatch):
     np.testing.assert_allclose(raster, rays, rtol=0.02)
 
 
-def test_raster_counts_a_flat_face_by_its_exact_area():
+def test_raster_counts_a_flat_face_by_its_exact_area(monkeypatch):
     # A fully visible Lambertian plate (two triangles of 1 m^2): I/E = albedo / pi * A * cos_s *
-    # cos_o exactly. Seen face-on or nearly edge-on, wherever each triangle covers at least
-    # EXACT_SHARE_MIN_PIXELS of projected area the raster's sum is exact at any pixel size; a
-    # triangle smaller than that counts its pixels as the ray grid does.
+    # cos_o exactly. Seen face-on or nearly edge-on, the raster's sum is exact at any pixel
+    # size: a triangle of at least EXACT_SHARE_MIN_PIXELS of projected area by its hits' shares
+    # of that area, a smaller one by the points of its own surface, where the pixel centres
+    # that fall on it say little (the ray grid's plain count: -100% to +181%).
     from raycast.renderer._direct_kernels import EXACT_SHARE_MIN_PIXELS
 
     scene = Scene.from_parts([Part.plate("plate", 2.0, 1.0, "paint")], {"paint": Lambertian(0.4)})
@@ -278,17 +281,47 @@ def test_raster_counts_a_flat_face_by_its_exact_area():
     obs = np.cos(tilt)[:, None] * normal + np.sin(tilt)[:, None] * side
     sun = np.tile(unit(normal + 0.4 * np.cross(normal, side)), (len(tilt), 1))
     exact = 0.4 / math.pi * 2.0 * (sun @ normal) * np.cos(tilt)
-    errors = []
+    errors, small = [], []
     for pixel_m in (0.3, 0.07, 0.013):
         raster = DirectRenderer(scene, pixel_m, sampling="raster").intensity(sun, obs)
         grid = DirectRenderer(scene, pixel_m, sampling="grid").intensity(sun, obs)
-        large = 1.0 * np.cos(tilt) >= EXACT_SHARE_MIN_PIXELS * pixel_m**2
-        np.testing.assert_allclose(raster[large], exact[large], rtol=1e-9)
-        np.testing.assert_allclose(raster[~large], grid[~large], rtol=1e-4)
-        errors.append(np.abs(grid[large] / exact[large] - 1.0))
-    # Both kinds occur, and the exact area matters: the grid's plain sum misses by a few %.
-    assert 0 < sum(map(len, errors)) < 3 * len(tilt)
-    assert np.max(np.concatenate(errors)) > 0.02
+        np.testing.assert_allclose(raster, exact, rtol=1e-9)
+        small.append(1.0 * np.cos(tilt) < EXACT_SHARE_MIN_PIXELS * pixel_m**2)
+        errors.append(np.abs(grid / exact - 1.0))
+    # Both kinds occur, and the exact area matters: the grid's plain sum misses by a few % on
+    # the large ones and by far more on the small ones.
+    small = np.concatenate(small)
+    errors = np.concatenate(errors)
+    assert 0 < small.sum() < len(small)
+    assert np.max(errors[~small]) > 0.02
+    assert np.max(errors[small]) > 0.2
+    # Without the small triangles' own sampling their light is lost: a share of 0 for their hits.
+    monkeypatch.setattr(DirectRenderer, "_small_flat_sums", lambda *args: None)
+    lost = DirectRenderer(scene, 0.3, sampling="raster").intensity(sun, obs)
+    edge_on = 1.0 * np.cos(tilt) < EXACT_SHARE_MIN_PIXELS * 0.3**2
+    assert np.all(lost[edge_on] == 0.0) and edge_on.any()
+
+
+def test_raster_samples_a_small_face_for_shadow_and_cover_on_its_own_surface():
+    # A 0.2 m plate (two triangles of 0.1 px at 0.3 m pixels, so sampled on their own surface)
+    # under a black 1 m plate 1 m above it. Sun overhead and the observer 60 deg off: the
+    # blocker shades the whole plate, or the half x < 0 when moved aside, and nothing when
+    # moved further; with the observer overhead and the Sun 60 deg off it hides the plate.
+    materials = {"paint": Lambertian(0.4), "black": Lambertian(0.0)}
+    small = Part.plate("small", 0.2, 0.2, "paint")
+    overhead, slanted = np.array([[0.0, 0.0, 1.0]]), np.array([[math.sin(math.pi / 3), 0.0, 0.5]])
+    full = 0.4 / math.pi * 0.04 * 1.0 * 0.5  # albedo / pi * area * cos_s * cos_o
+
+    def seen(offset_x, sun, obs):
+        blocker = Part.plate("blocker", 1.0, 1.0, "black").transformed(offset_m=(offset_x, 0.0, 1.0))
+        scene = Scene.from_parts([small, blocker], materials)
+        return DirectRenderer(scene, 0.3, sampling="raster").intensity(sun, obs)[0]
+
+    assert seen(-3.0, overhead, slanted) == pytest.approx(full, rel=1e-9)  # blocker aside
+    assert seen(0.0, overhead, slanted) == 0.0  # in its shadow
+    assert 0.3 * full < seen(-0.5, overhead, slanted) < 0.7 * full  # half in its shadow
+    assert seen(0.0, slanted, overhead) == 0.0  # hidden from the observer
+    assert seen(-3.0, slanted, overhead) == pytest.approx(full, rel=1e-9)
 
 
 def test_scan_conversion_leaves_out_the_inner_sides_of_closed_parts_only():

@@ -14,7 +14,8 @@ from raycast.renderer.rays import SUN_RADIUS_SINE, risen_sun
 # offset (a compact triangle surely; a strip of 8 pixels' area covers 8 centres on average,
 # none with odds of about e**-8), so the share's bias is negligible. A smaller triangle can fall
 # between the centres, and a share would then drop its light in some frames and inflate it in
-# others, on average too little; its hits count a pixel each, which is right on average.
+# others, on average too little: a flat one is sampled on its own surface instead
+# (small_triangle_rays), its hits counting nothing.
 EXACT_SHARE_MIN_PIXELS = 8.0
 
 
@@ -168,8 +169,11 @@ def raster_hits(
         number of pixel centres it covers before the depth test: what each of its hits stands
         for when the hits of a flat triangle count as the lit and seen fraction of its whole
         area (:func:`flat_sums`). Near 1 on a large face seen face-on, far from it on a face seen
-        nearly edge-on, whose thin strip the pixel centres cover by chance. 1 for triangles under
-        ``EXACT_SHARE_MIN_PIXELS`` of projected area.
+        nearly edge-on, whose thin strip the pixel centres cover by chance. 0 for triangles under
+        ``EXACT_SHARE_MIN_PIXELS`` of projected area: those are listed in ``small``.
+    small_frames, small_prim : (s,) int64, the frames and triangles drawn and sunward with a
+        projected area above 0 and under ``EXACT_SHARE_MIN_PIXELS``.
+    small_pixels : (s,) float64, their exact projected areas in pixels.
     """
     n_tri = len(corners)
     window = np.zeros((len(frames), 4), dtype=np.int64)
@@ -198,6 +202,10 @@ def raster_hits(
     share = np.empty(capacity)
     # Per triangle, in the frame being drawn: its projected area and covered pixel centres.
     exact, covered = np.zeros(n_tri), np.zeros(n_tri)
+    small_frames = np.empty(64, dtype=np.int64)
+    small_prim = np.empty(64, dtype=np.int64)
+    small_pixels = np.empty(64)
+    n_small = 0
     nearest = np.empty(largest, dtype=np.float32)
     winner = np.empty(largest, dtype=np.int32)
     xs, ys = np.empty(3), np.empty(3)
@@ -253,6 +261,14 @@ def raster_hits(
                         nearest[row + i] = z
                         winner[row + i] = t
                     z += dz
+        for t in range(n_tri):
+            if drawn[t, f] and sunward[t, f] and 0.0 < exact[t] < EXACT_SHARE_MIN_PIXELS:
+                if n_small == len(small_prim):
+                    small_frames = _doubled(small_frames, n_small)
+                    small_prim = _doubled(small_prim, n_small)
+                    small_pixels = _doubled(small_pixels, n_small)
+                small_frames[n_small], small_prim[n_small], small_pixels[n_small] = f, t, exact[t]
+                n_small += 1
         for pixel in range(width * rows):
             t = winner[pixel]
             if t < 0 or not sunward[t, f]:
@@ -273,7 +289,7 @@ def raster_hits(
             owners[count], prim[count] = f, t
             uv[count, 0], uv[count, 1] = a, b
             # (The pixel it won is one it covers: covered[t] >= 1.)
-            share[count] = exact[t] / covered[t] if exact[t] >= EXACT_SHARE_MIN_PIXELS else 1.0
+            share[count] = exact[t] / covered[t] if exact[t] >= EXACT_SHARE_MIN_PIXELS else 0.0
             side = 1.0
             if face_normals[t, 0] * obs[f, 0] + face_normals[t, 1] * obs[f, 1] + face_normals[t, 2] * obs[f, 2] < 0.0:
                 side = -1.0
@@ -294,7 +310,58 @@ def raster_hits(
                 )
                 shadow_rays[count, 3 + x] = direction[x]
             count += 1
-    return owners[:count], prim[:count], uv[:count], shadow_rays[:count], share[:count]
+    return (
+        owners[:count],
+        prim[:count],
+        uv[:count],
+        shadow_rays[:count],
+        share[:count],
+        small_frames[:n_small],
+        small_prim[:n_small],
+        small_pixels[:n_small],
+    )
+
+
+@njit(cache=True, nogil=True)
+def _doubled(array, count):
+    out = np.empty(2 * len(array), dtype=array.dtype)
+    out[:count] = array[:count]
+    return out
+
+
+@njit(cache=True, nogil=True)
+def small_triangle_rays(corners, face_normals, obs, sun, frames, prim, offset, n):
+    """(2 s n**2, 6) float32 rays that sample s small triangles on their own surface: from the
+    centroids of the n**2 equal triangles of each one's n-fold subdivision, ``offset`` above it
+    (along the face normal turned toward the observer), a ray toward the observer and one toward
+    the Sun (the part of its disk above the face's plane), in that order, point after point.
+    A point is seen where its first ray is not blocked and lit where its second is not."""
+    per = n * n
+    rays = np.empty((2 * len(frames) * per, 6), dtype=np.float32)
+    row = 0
+    for k in range(len(frames)):
+        f, t = frames[k], prim[k]
+        side = 1.0
+        if face_normals[t, 0] * obs[f, 0] + face_normals[t, 1] * obs[f, 1] + face_normals[t, 2] * obs[f, 2] < 0.0:
+            side = -1.0
+        nx, ny, nz = side * face_normals[t, 0], side * face_normals[t, 1], side * face_normals[t, 2]
+        toward_sun = risen_sun(nx, ny, nz, sun[f, 0], sun[f, 1], sun[f, 2])
+        for i in range(n):
+            for j in range(n - i):
+                # The subdivision's upward triangle at (i, j), then the downward one beside it.
+                for shift in (1.0 / 3.0, 2.0 / 3.0):
+                    if shift > 0.5 and i + j == n - 1:
+                        continue
+                    a, b = (i + shift) / n, (j + shift) / n
+                    for x in range(3):
+                        point = (1.0 - a - b) * corners[t, 0, x] + a * corners[t, 1, x] + b * corners[t, 2, x]
+                        point += offset * side * face_normals[t, x]
+                        rays[row, x] = point
+                        rays[row + 1, x] = point
+                        rays[row, 3 + x] = obs[f, x]
+                        rays[row + 1, 3 + x] = toward_sun[x]
+                    row += 2
+    return rays
 
 
 @njit(cache=True, nogil=True)
