@@ -270,8 +270,9 @@ def test_raster_counts_a_flat_face_by_its_exact_area(monkeypatch):
     # A fully visible Lambertian plate (two triangles of 1 m^2): I/E = albedo / pi * A * cos_s *
     # cos_o exactly. Seen face-on or nearly edge-on, the raster's sum is exact at any pixel
     # size: a triangle of at least EXACT_SHARE_MIN_PIXELS of projected area by its hits' shares
-    # of that area, a smaller one by the points of its own surface, where the pixel centres
-    # that fall on it say little (the ray grid's plain count: -100% to +181%).
+    # of that area, a smaller one (here always a sliver: large, seen nearly edge-on) by the
+    # points of its own surface, where the pixel centres that fall on it say little (the ray
+    # grid's plain count: -100% to +181%).
     from raycast.renderer._direct_kernels import EXACT_SHARE_MIN_PIXELS
 
     scene = Scene.from_parts([Part.plate("plate", 2.0, 1.0, "paint")], {"paint": Lambertian(0.4)})
@@ -302,26 +303,30 @@ def test_raster_counts_a_flat_face_by_its_exact_area(monkeypatch):
     assert np.all(lost[edge_on] == 0.0) and edge_on.any()
 
 
-def test_raster_samples_a_small_face_for_shadow_and_cover_on_its_own_surface():
-    # A 0.2 m plate (two triangles of 0.1 px at 0.3 m pixels, so sampled on their own surface)
-    # under a black 1 m plate 1 m above it. Sun overhead and the observer 60 deg off: the
-    # blocker shades the whole plate, or the half x < 0 when moved aside, and nothing when
-    # moved further; with the observer overhead and the Sun 60 deg off it hides the plate.
+def test_raster_samples_a_sliver_for_shadow_and_cover_on_its_own_surface():
+    # A 1 m plate seen 88 deg from face-on at 0.2 m pixels: each triangle has 12.5 pixels of
+    # area of its own and 0.4 seen, a sliver sampled on its own surface. Sun overhead: a black
+    # 2 m plate 1 m above shades all of it, or the half x < 0 when moved aside, and nothing when
+    # moved further; a black wall beside it at x = 1 m hides it from the observer.
     materials = {"paint": Lambertian(0.4), "black": Lambertian(0.0)}
-    small = Part.plate("small", 0.2, 0.2, "paint")
-    overhead, slanted = np.array([[0.0, 0.0, 1.0]]), np.array([[math.sin(math.pi / 3), 0.0, 0.5]])
-    full = 0.4 / math.pi * 0.04 * 1.0 * 0.5  # albedo / pi * area * cos_s * cos_o
+    plate = Part.plate("plate", 1.0, 1.0, "paint")
+    tilt = math.radians(88.0)
+    sun, obs = np.array([[0.0, 0.0, 1.0]]), np.array([[math.sin(tilt), 0.0, math.cos(tilt)]])
+    full = 0.4 / math.pi * 1.0 * 1.0 * math.cos(tilt)  # albedo / pi * area * cos_s * cos_o
+    wall_rotation = np.array([[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])  # normal -> -x
 
-    def seen(offset_x, sun, obs):
-        blocker = Part.plate("blocker", 1.0, 1.0, "black").transformed(offset_m=(offset_x, 0.0, 1.0))
-        scene = Scene.from_parts([small, blocker], materials)
-        return DirectRenderer(scene, 0.3, sampling="raster").intensity(sun, obs)[0]
+    def seen(*blockers):
+        scene = Scene.from_parts([plate, *blockers], materials)
+        return DirectRenderer(scene, 0.2, sampling="raster").intensity(sun, obs)[0]
 
-    assert seen(-3.0, overhead, slanted) == pytest.approx(full, rel=1e-9)  # blocker aside
-    assert seen(0.0, overhead, slanted) == 0.0  # in its shadow
-    assert 0.3 * full < seen(-0.5, overhead, slanted) < 0.7 * full  # half in its shadow
-    assert seen(0.0, slanted, overhead) == 0.0  # hidden from the observer
-    assert seen(-3.0, slanted, overhead) == pytest.approx(full, rel=1e-9)
+    def roof(x_m):
+        return Part.plate("roof", 2.0, 2.0, "black").transformed(offset_m=(x_m, 0.0, 1.0))
+
+    wall = Part.plate("wall", 2.0, 2.0, "black").transformed(wall_rotation, offset_m=(1.0, 0.0, 0.5))
+    assert seen(roof(-5.0)) == pytest.approx(full, rel=1e-9)  # roof aside
+    assert seen(roof(0.0)) == 0.0  # in its shadow
+    assert 0.3 * full < seen(roof(-1.0)) < 0.7 * full  # half in its shadow
+    assert seen(wall) == 0.0  # hidden from the observer
 
 
 def test_scan_conversion_leaves_out_the_inner_sides_of_closed_parts_only():

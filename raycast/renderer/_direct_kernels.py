@@ -14,9 +14,22 @@ from raycast.renderer.rays import SUN_RADIUS_SINE, risen_sun
 # offset (a compact triangle surely; a strip of 8 pixels' area covers 8 centres on average,
 # none with odds of about e**-8), so the share's bias is negligible. A smaller triangle can fall
 # between the centres, and a share would then drop its light in some frames and inflate it in
-# others, on average too little: a flat one is sampled on its own surface instead
-# (small_triangle_rays), its hits counting nothing.
+# others, on average too little. Where it is that small because it is seen nearly edge-on (its
+# own area at least this many pixels, at most SLIVER_COSINE of it seen: a sliver, a strip whose
+# pixel centres say little of it), a flat one is sampled on its own surface instead
+# (small_triangle_rays), its hits counting nothing. Another small triangle counts a pixel per
+# hit, which is right on average (and the tiles of a finely cut surface sum as the surface
+# does), at the cost of a pixel and not of 18 rays: a flat-shaded icosphere of 20 480 triangles
+# at radius / 150 pixels has 1 284 slivers a frame at 0.25 (2 991 with every triangle over the
+# floor in its own area), 1.4x the time of none, and half the error.
 EXACT_SHARE_MIN_PIXELS = 8.0
+SLIVER_COSINE = 0.25
+
+
+@njit(cache=True, nogil=True)
+def _sliver(projected, own):
+    """Whether a triangle of ``own`` pixels of area, ``projected`` of them seen, is a sliver."""
+    return own >= EXACT_SHARE_MIN_PIXELS and projected <= SLIVER_COSINE * own
 
 
 @njit(cache=True, nogil=True)
@@ -170,9 +183,10 @@ def raster_hits(
         for when the hits of a flat triangle count as the lit and seen fraction of its whole
         area (:func:`flat_sums`). Near 1 on a large face seen face-on, far from it on a face seen
         nearly edge-on, whose thin strip the pixel centres cover by chance. 0 for triangles under
-        ``EXACT_SHARE_MIN_PIXELS`` of projected area: those are listed in ``small``.
-    small_frames, small_prim : (s,) int64, the frames and triangles drawn and sunward with a
-        projected area above 0 and under ``EXACT_SHARE_MIN_PIXELS``.
+        ``EXACT_SHARE_MIN_PIXELS`` of projected area but at least that much area of their own
+        (slivers, listed in ``small``); 1 for triangles under it in their own area too.
+    small_frames, small_prim : (s,) int64, the frames and slivers drawn and sunward: a
+        projected area above 0 and under ``EXACT_SHARE_MIN_PIXELS``, their own area not.
     small_pixels : (s,) float64, their exact projected areas in pixels.
     """
     n_tri = len(corners)
@@ -202,6 +216,22 @@ def raster_hits(
     share = np.empty(capacity)
     # Per triangle, in the frame being drawn: its projected area and covered pixel centres.
     exact, covered = np.zeros(n_tri), np.zeros(n_tri)
+    # Each triangle's own area in pixels (h**2): a triangle under the floor in it is small in
+    # itself, not a sliver seen edge-on.
+    own = np.empty(n_tri)
+    for t in range(n_tri):
+        ax, ay, az = (
+            corners[t, 1, 0] - corners[t, 0, 0],
+            corners[t, 1, 1] - corners[t, 0, 1],
+            corners[t, 1, 2] - corners[t, 0, 2],
+        )
+        bx, by, bz = (
+            corners[t, 2, 0] - corners[t, 0, 0],
+            corners[t, 2, 1] - corners[t, 0, 1],
+            corners[t, 2, 2] - corners[t, 0, 2],
+        )
+        cx, cy, cz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+        own[t] = 0.5 * np.sqrt(cx * cx + cy * cy + cz * cz) / (h * h)
     small_frames = np.empty(64, dtype=np.int64)
     small_prim = np.empty(64, dtype=np.int64)
     small_pixels = np.empty(64)
@@ -262,7 +292,7 @@ def raster_hits(
                         winner[row + i] = t
                     z += dz
         for t in range(n_tri):
-            if drawn[t, f] and sunward[t, f] and 0.0 < exact[t] < EXACT_SHARE_MIN_PIXELS:
+            if drawn[t, f] and sunward[t, f] and 0.0 < exact[t] < EXACT_SHARE_MIN_PIXELS and _sliver(exact[t], own[t]):
                 if n_small == len(small_prim):
                     small_frames = _doubled(small_frames, n_small)
                     small_prim = _doubled(small_prim, n_small)
@@ -289,7 +319,10 @@ def raster_hits(
             owners[count], prim[count] = f, t
             uv[count, 0], uv[count, 1] = a, b
             # (The pixel it won is one it covers: covered[t] >= 1.)
-            share[count] = exact[t] / covered[t] if exact[t] >= EXACT_SHARE_MIN_PIXELS else 0.0
+            if exact[t] >= EXACT_SHARE_MIN_PIXELS:
+                share[count] = exact[t] / covered[t]
+            else:
+                share[count] = 0.0 if _sliver(exact[t], own[t]) else 1.0
             side = 1.0
             if face_normals[t, 0] * obs[f, 0] + face_normals[t, 1] * obs[f, 1] + face_normals[t, 2] * obs[f, 2] < 0.0:
                 side = -1.0
