@@ -258,7 +258,7 @@ def test_scan_conversion_finds_the_same_first_hits_as_rays(model, monkeypatch):
 
     flat_sums = _direct_kernels.flat_sums
     monkeypatch.setattr(_direct_kernels, "flat_sums", lambda *args: flat_sums(*args[:-1], np.ones_like(args[-1])))
-    monkeypatch.setattr(DirectRenderer, "_small_flat_sums", lambda *args: None)
+    monkeypatch.setattr(DirectRenderer, "_sliver_sums", lambda *args: None)
     plain = DirectRenderer(scene, 0.03, sampling="raster").intensity(sun, obs)
     np.testing.assert_allclose(plain, rays, rtol=1e-4)
     assert np.count_nonzero(plain) >= 3
@@ -297,7 +297,7 @@ def test_raster_counts_a_flat_face_by_its_exact_area(monkeypatch):
     assert np.max(errors[~small]) > 0.02
     assert np.max(errors[small]) > 0.2
     # Without the small triangles' own sampling their light is lost: a share of 0 for their hits.
-    monkeypatch.setattr(DirectRenderer, "_small_flat_sums", lambda *args: None)
+    monkeypatch.setattr(DirectRenderer, "_sliver_sums", lambda *args: None)
     lost = DirectRenderer(scene, 0.3, sampling="raster").intensity(sun, obs)
     edge_on = 1.0 * np.cos(tilt) < EXACT_SHARE_MIN_PIXELS * 0.3**2
     assert np.all(lost[edge_on] == 0.0) and edge_on.any()

@@ -17,7 +17,7 @@ from raycast.renderer.rays import SUN_RADIUS_SINE, risen_sun
 # others, on average too little. Where it is that small because it is seen nearly edge-on (its
 # own area at least this many pixels, at most SLIVER_COSINE of it seen: a sliver, a strip whose
 # pixel centres say little of it), a flat one is sampled on its own surface instead
-# (small_triangle_rays), its hits counting nothing. Another small triangle counts a pixel per
+# (sliver_rays), its hits counting nothing. Another small triangle counts a pixel per
 # hit, which is right on average (and the tiles of a finely cut surface sum as the surface
 # does), at the cost of a pixel and not of 18 rays: a flat-shaded icosphere of 20 480 triangles
 # at radius / 150 pixels has 1 284 slivers a frame at 0.25 (2 991 with every triangle over the
@@ -184,10 +184,10 @@ def raster_hits(
         area (:func:`flat_sums`). Near 1 on a large face seen face-on, far from it on a face seen
         nearly edge-on, whose thin strip the pixel centres cover by chance. 0 for triangles under
         ``EXACT_SHARE_MIN_PIXELS`` of projected area but at least that much area of their own
-        (slivers, listed in ``small``); 1 for triangles under it in their own area too.
-    small_frames, small_prim : (s,) int64, the frames and slivers drawn and sunward: a
+        (slivers, listed in ``sliver_*``); 1 for triangles under it in their own area too.
+    sliver_frames, sliver_prim : (s,) int64, the frames and slivers drawn and sunward: a
         projected area above 0 and under ``EXACT_SHARE_MIN_PIXELS``, their own area not.
-    small_pixels : (s,) float64, their exact projected areas in pixels.
+    sliver_pixels : (s,) float64, their exact projected areas in pixels.
     """
     n_tri = len(corners)
     window = np.zeros((len(frames), 4), dtype=np.int64)
@@ -232,10 +232,10 @@ def raster_hits(
         )
         cx, cy, cz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
         own[t] = 0.5 * np.sqrt(cx * cx + cy * cy + cz * cz) / (h * h)
-    small_frames = np.empty(64, dtype=np.int64)
-    small_prim = np.empty(64, dtype=np.int64)
-    small_pixels = np.empty(64)
-    n_small = 0
+    sliver_frames = np.empty(64, dtype=np.int64)
+    sliver_prim = np.empty(64, dtype=np.int64)
+    sliver_pixels = np.empty(64)
+    n_slivers = 0
     nearest = np.empty(largest, dtype=np.float32)
     winner = np.empty(largest, dtype=np.int32)
     xs, ys = np.empty(3), np.empty(3)
@@ -293,12 +293,12 @@ def raster_hits(
                     z += dz
         for t in range(n_tri):
             if drawn[t, f] and sunward[t, f] and 0.0 < exact[t] < EXACT_SHARE_MIN_PIXELS and _sliver(exact[t], own[t]):
-                if n_small == len(small_prim):
-                    small_frames = _doubled(small_frames, n_small)
-                    small_prim = _doubled(small_prim, n_small)
-                    small_pixels = _doubled(small_pixels, n_small)
-                small_frames[n_small], small_prim[n_small], small_pixels[n_small] = f, t, exact[t]
-                n_small += 1
+                if n_slivers == len(sliver_prim):
+                    sliver_frames = _doubled(sliver_frames, n_slivers)
+                    sliver_prim = _doubled(sliver_prim, n_slivers)
+                    sliver_pixels = _doubled(sliver_pixels, n_slivers)
+                sliver_frames[n_slivers], sliver_prim[n_slivers], sliver_pixels[n_slivers] = f, t, exact[t]
+                n_slivers += 1
         for pixel in range(width * rows):
             t = winner[pixel]
             if t < 0 or not sunward[t, f]:
@@ -349,9 +349,9 @@ def raster_hits(
         uv[:count],
         shadow_rays[:count],
         share[:count],
-        small_frames[:n_small],
-        small_prim[:n_small],
-        small_pixels[:n_small],
+        sliver_frames[:n_slivers],
+        sliver_prim[:n_slivers],
+        sliver_pixels[:n_slivers],
     )
 
 
@@ -363,8 +363,8 @@ def _doubled(array, count):
 
 
 @njit(cache=True, nogil=True)
-def small_triangle_rays(corners, face_normals, obs, sun, frames, prim, offset, n):
-    """(2 s n**2, 6) float32 rays that sample s small triangles on their own surface: from the
+def sliver_rays(corners, face_normals, obs, sun, frames, prim, offset, n):
+    """(2 s n**2, 6) float32 rays that sample s slivers on their own surface: from the
     centroids of the n**2 equal triangles of each one's n-fold subdivision, ``offset`` above it
     (along the face normal turned toward the observer), a ray toward the observer and one toward
     the Sun (the part of its disk above the face's plane), in that order, point after point.

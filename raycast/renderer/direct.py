@@ -27,7 +27,7 @@ along the real pass: 0.0058 -> 0.0022 mag RMS at 2 cm, docs/renderer.md). A smal
 triangle (``_direct_kernels.EXACT_SHARE_MIN_PIXELS``) that is a sliver, large but seen nearly
 edge-on, which can fall between the centres, is sampled on its own surface: its exact projected
 area times the fraction of its points that rays find seen and lit
-(:meth:`DirectRenderer._small_flat_sums`; TOPEX at 4.5 cm: 0.0083 -> 0.0042).
+(:meth:`DirectRenderer._sliver_sums`; TOPEX at 4.5 cm: 0.0083 -> 0.0042).
 
 The pixel grid of each direction pair is shifted by a low-discrepancy (R2) sub-pixel offset, so
 edge errors of successive frames do not repeat; the result is deterministic.
@@ -64,9 +64,9 @@ SAMPLINGS = ("adaptive", "grid", "raster")
 _PLASTIC = 1.32471795724474602596
 _MAX_RAYS_PER_BATCH = 1_500_000
 # A flat sliver in the raster (under EXACT_SHARE_MIN_PIXELS of projected area, not of its own) is
-# sampled at the centroids of this many squared equal parts of it (DirectRenderer._small_flat_sums;
-# 2 cost TOPEX 0.0051 instead of 0.0038 mag at 6 cm pixels).
-SMALL_TRIANGLE_SUBDIVISION = 3
+# sampled at the centroids of this many squared equal parts of it (DirectRenderer._sliver_sums;
+# 2 cost TOPEX 0.0051 instead of 0.0043 mag at 6 cm pixels).
+SLIVER_SUBDIVISION = 3
 _TILE = 8
 
 
@@ -299,7 +299,7 @@ class DirectRenderer:
                     np.searchsorted(pixels, pixels[begin] - n_u[begin] * n_v[begin] + _MAX_RAYS_PER_BATCH, side="right")
                 ),
             )
-            frames, prim, uv, shadow_rays, share, *small = _direct_kernels.raster_hits(
+            frames, prim, uv, shadow_rays, share, *slivers = _direct_kernels.raster_hits(
                 corners,
                 pu,
                 pv,
@@ -318,7 +318,7 @@ class DirectRenderer:
                 offset,
             )
             begin = end
-            self._small_flat_sums(mesh, scene, *small, sun_body, obs_body, flat_table, result)
+            self._sliver_sums(mesh, scene, *slivers, sun_body, obs_body, flat_table, result)
             if len(frames) == 0:
                 continue
             if groups is None:  # every hit casts its ray
@@ -348,21 +348,21 @@ class DirectRenderer:
                 )
         return result * h * h
 
-    def _small_flat_sums(self, mesh, scene, frames, prim, pixels, sun_body, obs_body, flat_table, out):
-        """Add the flat-shaded slivers (:func:`raycast.renderer._direct_kernels.raster_hits`'
-        ``small``: under ``EXACT_SHARE_MIN_PIXELS`` of projected area, not of their own) to ``out[frame]``, in
-        pixels: each one's table radiance times its exact projected area ``pixels`` times the
-        fraction of the points of its surface (:data:`SMALL_TRIANGLE_SUBDIVISION` squared) that
-        are both seen and lit (:func:`raycast.renderer._direct_kernels.small_triangle_rays`).
-        A triangle that small can fall between the pixel centres, so its hits say little of it;
-        its own surface says how much of it is seen and lit."""
+    def _sliver_sums(self, mesh, scene, frames, prim, pixels, sun_body, obs_body, flat_table, out):
+        """Add the flat-shaded slivers of :func:`raycast.renderer._direct_kernels.raster_hits`
+        (under ``EXACT_SHARE_MIN_PIXELS`` of projected area, not of their own) to ``out[frame]``,
+        in pixels: each one's table radiance times its exact projected area ``pixels`` times the
+        fraction of the points of its surface (:data:`SLIVER_SUBDIVISION` squared) that are both
+        seen and lit (:func:`raycast.renderer._direct_kernels.sliver_rays`). A strip that thin
+        can fall between the pixel centres, so its hits say little of it; its own surface says
+        how much of it is seen and lit."""
         flat = ~self._state["smooth"][prim]
         frames, prim, pixels = frames[flat], prim[flat], pixels[flat]
         if len(frames) == 0:
             return
-        n = SMALL_TRIANGLE_SUBDIVISION
+        n = SLIVER_SUBDIVISION
         offset = 1e-4 * max(mesh.radius_m, 1.0)
-        rays = _direct_kernels.small_triangle_rays(
+        rays = _direct_kernels.sliver_rays(
             mesh.corners_m, mesh.face_normals, obs_body, sun_body, frames, prim, offset, n
         )
         open_ = ~scene.test_occlusions(rays).numpy().reshape(len(frames), n * n, 2).any(axis=2)
