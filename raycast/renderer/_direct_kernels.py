@@ -15,21 +15,18 @@ from raycast.renderer.rays import SUN_RADIUS_SINE, risen_sun
 # none with odds of about e**-8), so the share's bias is negligible. A smaller triangle can fall
 # between the centres, and a share would then drop its light in some frames and inflate it in
 # others, on average too little. Where it is that small because it is seen nearly edge-on (its
-# own area at least this many pixels, at most SLIVER_COSINE of it seen: a sliver, a strip whose
-# pixel centres say little of it), a flat one is sampled on its own surface instead
-# (sliver_rays), its hits counting nothing. Another small triangle counts a pixel per
-# hit, which is right on average (and the tiles of a finely cut surface sum as the surface
-# does), at the cost of a pixel and not of 18 rays: a flat-shaded icosphere of 20 480 triangles
-# at radius / 150 pixels has 1 284 slivers a frame at 0.25 (2 991 with every triangle over the
-# floor in its own area), 1.4x the time of none, and half the error.
+# own area at least this many pixels, at most a given fraction of it seen: a sliver, a strip
+# whose pixel centres say little of it), a flat one is sampled on its own surface instead
+# (sliver_rays, raycast.renderer.direct.SLIVER_COSINE), its hits counting nothing. Another small
+# triangle counts a pixel per hit, which is right on average (and the tiles of a finely cut
+# surface sum as the surface does).
 EXACT_SHARE_MIN_PIXELS = 8.0
-SLIVER_COSINE = 0.25
 
 
 @njit(cache=True, nogil=True)
-def _sliver(projected, own):
+def _sliver(projected, own, sliver_cosine):
     """Whether a triangle of ``own`` pixels of area, ``projected`` of them seen, is a sliver."""
-    return own >= EXACT_SHARE_MIN_PIXELS and projected <= SLIVER_COSINE * own
+    return own >= EXACT_SHARE_MIN_PIXELS and projected <= sliver_cosine * own
 
 
 @njit(cache=True, nogil=True)
@@ -150,7 +147,23 @@ def lattice_rays(base, step_u, step_v, backward, frame, i, j):
 
 @njit(cache=True, nogil=True)
 def raster_hits(
-    corners, pu, pv, depth, start_u, start_v, h, n_u, n_v, frames, drawn, sunward, face_normals, obs, sun, offset
+    corners,
+    pu,
+    pv,
+    depth,
+    start_u,
+    start_v,
+    h,
+    n_u,
+    n_v,
+    frames,
+    drawn,
+    sunward,
+    face_normals,
+    obs,
+    sun,
+    offset,
+    sliver_cosine,
 ):
     """First hits of the orthographic ray grid by scan conversion, kept where the hit side
     faces the Sun, each with the share of its triangle's exact projected area it stands for.
@@ -171,6 +184,8 @@ def raster_hits(
     sunward : (t, m) bool, triangles whose seen side faces the Sun.
     face_normals : (t, 3) float; obs, sun : (m, 3) float, unit vectors.
     offset : float, how far above the surface shadow rays start.
+    sliver_cosine : float, a triangle of at least ``EXACT_SHARE_MIN_PIXELS`` of area of its own
+        with at most this fraction of it projected is a sliver (0: none is).
 
     Returns
     -------
@@ -292,7 +307,12 @@ def raster_hits(
                         winner[row + i] = t
                     z += dz
         for t in range(n_tri):
-            if drawn[t, f] and sunward[t, f] and 0.0 < exact[t] < EXACT_SHARE_MIN_PIXELS and _sliver(exact[t], own[t]):
+            if (
+                drawn[t, f]
+                and sunward[t, f]
+                and 0.0 < exact[t] < EXACT_SHARE_MIN_PIXELS
+                and _sliver(exact[t], own[t], sliver_cosine)
+            ):
                 if n_slivers == len(sliver_prim):
                     sliver_frames = _doubled(sliver_frames, n_slivers)
                     sliver_prim = _doubled(sliver_prim, n_slivers)
@@ -322,7 +342,7 @@ def raster_hits(
             if exact[t] >= EXACT_SHARE_MIN_PIXELS:
                 share[count] = exact[t] / covered[t]
             else:
-                share[count] = 0.0 if _sliver(exact[t], own[t]) else 1.0
+                share[count] = 0.0 if _sliver(exact[t], own[t], sliver_cosine) else 1.0
             side = 1.0
             if face_normals[t, 0] * obs[f, 0] + face_normals[t, 1] * obs[f, 1] + face_normals[t, 2] * obs[f, 2] < 0.0:
                 side = -1.0

@@ -63,9 +63,13 @@ SAMPLINGS = ("adaptive", "grid", "raster")
 
 _PLASTIC = 1.32471795724474602596
 _MAX_RAYS_PER_BATCH = 1_500_000
-# A flat sliver in the raster (under EXACT_SHARE_MIN_PIXELS of projected area, not of its own) is
-# sampled at the centroids of this many squared equal parts of it (DirectRenderer._sliver_sums;
-# 2 cost TOPEX 0.0051 instead of 0.0043 mag at 6 cm pixels).
+# A flat triangle in the raster under EXACT_SHARE_MIN_PIXELS of projected area but not of its own,
+# with at most this fraction of it projected (seen within 14.5 deg of edge-on), is a sliver,
+# sampled at the centroids of SLIVER_SUBDIVISION squared equal parts of it
+# (DirectRenderer._sliver_sums; 2 cost TOPEX 0.0051 instead of 0.0043 mag at 6 cm pixels).
+# Sampling costs 18 rays a sliver where a pixel count costs its few pixels: `python
+# bench/raster_slivers.py` measures both on TOPEX and on a finely cut flat-shaded sphere.
+SLIVER_COSINE = 0.25
 SLIVER_SUBDIVISION = 3
 _TILE = 8
 
@@ -316,6 +320,7 @@ class DirectRenderer:
                 obs_body,
                 sun_body,
                 offset,
+                SLIVER_COSINE,
             )
             begin = end
             self._sliver_sums(mesh, scene, *slivers, sun_body, obs_body, flat_table, result)
