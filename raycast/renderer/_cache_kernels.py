@@ -361,11 +361,11 @@ def lit_classes(
             touched[g >> 6] |= one << np.uint64(g & 63)
         if count + n_classes > capacity:
             capacity = max(2 * capacity, count + n_classes)
-            out_frames = _grown(out_frames, capacity, count)
-            out_classes = _grown(out_classes, capacity, count)
-            out_area = _grown(out_area, capacity, count)
-            out_normal = _grown(out_normal, capacity, count)
-            out_geo = _grown(out_geo, capacity, count)
+            out_frames = grown(out_frames, capacity, count)
+            out_classes = grown(out_classes, capacity, count)
+            out_area = grown(out_area, capacity, count)
+            out_normal = grown(out_normal, capacity, count)
+            out_geo = grown(out_geo, capacity, count)
         sx, sy, sz = sun[f, 0], sun[f, 1], sun[f, 2]
         ox, oy, oz = obs[f, 0], obs[f, 1], obs[f, 2]
         # Groups come sorted by class (SceneCache.build): each class is summed in one run.
@@ -422,7 +422,8 @@ def lit_classes(
 
 
 @njit(cache=True, nogil=True)
-def _grown(array, capacity, count):
+def grown(array, capacity, count):
+    """A copy of ``array`` with room for ``capacity`` rows, its first ``count`` rows kept."""
     out = np.empty((capacity,) + array.shape[1:], dtype=array.dtype)
     out[:count] = array[:count]
     return out

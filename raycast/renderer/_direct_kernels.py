@@ -7,6 +7,7 @@ interpolation: one pass per batch of rays instead of a dozen (n, 3) gathers.
 from numba import njit
 import numpy as np
 
+from raycast.renderer._cache_kernels import grown
 from raycast.renderer.rays import SUN_RADIUS_SINE, risen_sun
 
 # A triangle's hits count as shares of its exact projected area (raster_hits) only when that
@@ -17,16 +18,10 @@ from raycast.renderer.rays import SUN_RADIUS_SINE, risen_sun
 # others, on average too little. Where it is that small because it is seen nearly edge-on (its
 # own area at least this many pixels, at most a given fraction of it seen: a sliver, a strip
 # whose pixel centres say little of it), a flat one is sampled on its own surface instead
-# (sliver_rays, raycast.renderer.direct.SLIVER_COSINE), its hits counting nothing. Another small
-# triangle counts a pixel per hit, which is right on average (and the tiles of a finely cut
-# surface sum as the surface does).
+# (sliver_rays; the rule is raycast.renderer.direct.sliver_areas'), its hits counting nothing.
+# Another small triangle counts a pixel per hit, which is right on average (and the tiles of a
+# finely cut surface sum as the surface does).
 EXACT_SHARE_MIN_PIXELS = 8.0
-
-
-@njit(cache=True, nogil=True)
-def _sliver(projected, own, sliver_cosine):
-    """Whether a triangle of ``own`` pixels of area, ``projected`` of them seen, is a sliver."""
-    return own >= EXACT_SHARE_MIN_PIXELS and projected <= sliver_cosine * own
 
 
 @njit(cache=True, nogil=True)
@@ -163,7 +158,7 @@ def raster_hits(
     obs,
     sun,
     offset,
-    sliver_cosine,
+    sliver_below,
 ):
     """First hits of the orthographic ray grid by scan conversion, kept where the hit side
     faces the Sun, each with the share of its triangle's exact projected area it stands for.
@@ -184,8 +179,8 @@ def raster_hits(
     sunward : (t, m) bool, triangles whose seen side faces the Sun.
     face_normals : (t, 3) float; obs, sun : (m, 3) float, unit vectors.
     offset : float, how far above the surface shadow rays start.
-    sliver_cosine : float, a triangle of at least ``EXACT_SHARE_MIN_PIXELS`` of area of its own
-        with at most this fraction of it projected is a sliver (0: none is).
+    sliver_below : (t,) float, pixels of projected area at or under which a triangle is a sliver
+        (0 where it never is; raycast.renderer.direct.sliver_areas).
 
     Returns
     -------
@@ -197,11 +192,11 @@ def raster_hits(
         number of pixel centres it covers before the depth test: what each of its hits stands
         for when the hits of a flat triangle count as the lit and seen fraction of its whole
         area (:func:`flat_sums`). Near 1 on a large face seen face-on, far from it on a face seen
-        nearly edge-on, whose thin strip the pixel centres cover by chance. 0 for triangles under
-        ``EXACT_SHARE_MIN_PIXELS`` of projected area but at least that much area of their own
-        (slivers, listed in ``sliver_*``); 1 for triangles under it in their own area too.
+        nearly edge-on, whose thin strip the pixel centres cover by chance. For triangles under
+        ``EXACT_SHARE_MIN_PIXELS`` of projected area: 0 for slivers (listed in ``sliver_*``), 1
+        for the others.
     sliver_frames, sliver_prim : (s,) int64, the frames and slivers drawn and sunward: a
-        projected area above 0 and under ``EXACT_SHARE_MIN_PIXELS``, their own area not.
+        projected area above 0, under ``EXACT_SHARE_MIN_PIXELS`` and at most ``sliver_below``.
     sliver_pixels : (s,) float64, their exact projected areas in pixels.
     """
     n_tri = len(corners)
@@ -231,22 +226,6 @@ def raster_hits(
     share = np.empty(capacity)
     # Per triangle, in the frame being drawn: its projected area and covered pixel centres.
     exact, covered = np.zeros(n_tri), np.zeros(n_tri)
-    # Each triangle's own area in pixels (h**2): a triangle under the floor in it is small in
-    # itself, not a sliver seen edge-on.
-    own = np.empty(n_tri)
-    for t in range(n_tri):
-        ax, ay, az = (
-            corners[t, 1, 0] - corners[t, 0, 0],
-            corners[t, 1, 1] - corners[t, 0, 1],
-            corners[t, 1, 2] - corners[t, 0, 2],
-        )
-        bx, by, bz = (
-            corners[t, 2, 0] - corners[t, 0, 0],
-            corners[t, 2, 1] - corners[t, 0, 1],
-            corners[t, 2, 2] - corners[t, 0, 2],
-        )
-        cx, cy, cz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
-        own[t] = 0.5 * np.sqrt(cx * cx + cy * cy + cz * cz) / (h * h)
     sliver_frames = np.empty(64, dtype=np.int64)
     sliver_prim = np.empty(64, dtype=np.int64)
     sliver_pixels = np.empty(64)
@@ -311,12 +290,12 @@ def raster_hits(
                 drawn[t, f]
                 and sunward[t, f]
                 and 0.0 < exact[t] < EXACT_SHARE_MIN_PIXELS
-                and _sliver(exact[t], own[t], sliver_cosine)
+                and exact[t] <= sliver_below[t]
             ):
                 if n_slivers == len(sliver_prim):
-                    sliver_frames = _doubled(sliver_frames, n_slivers)
-                    sliver_prim = _doubled(sliver_prim, n_slivers)
-                    sliver_pixels = _doubled(sliver_pixels, n_slivers)
+                    sliver_frames = grown(sliver_frames, 2 * n_slivers, n_slivers)
+                    sliver_prim = grown(sliver_prim, 2 * n_slivers, n_slivers)
+                    sliver_pixels = grown(sliver_pixels, 2 * n_slivers, n_slivers)
                 sliver_frames[n_slivers], sliver_prim[n_slivers], sliver_pixels[n_slivers] = f, t, exact[t]
                 n_slivers += 1
         for pixel in range(width * rows):
@@ -342,7 +321,7 @@ def raster_hits(
             if exact[t] >= EXACT_SHARE_MIN_PIXELS:
                 share[count] = exact[t] / covered[t]
             else:
-                share[count] = 0.0 if _sliver(exact[t], own[t], sliver_cosine) else 1.0
+                share[count] = 0.0 if exact[t] <= sliver_below[t] else 1.0
             side = 1.0
             if face_normals[t, 0] * obs[f, 0] + face_normals[t, 1] * obs[f, 1] + face_normals[t, 2] * obs[f, 2] < 0.0:
                 side = -1.0
@@ -373,13 +352,6 @@ def raster_hits(
         sliver_prim[:n_slivers],
         sliver_pixels[:n_slivers],
     )
-
-
-@njit(cache=True, nogil=True)
-def _doubled(array, count):
-    out = np.empty(2 * len(array), dtype=array.dtype)
-    out[:count] = array[:count]
-    return out
 
 
 @njit(cache=True, nogil=True)

@@ -64,8 +64,8 @@ SAMPLINGS = ("adaptive", "grid", "raster")
 _PLASTIC = 1.32471795724474602596
 _MAX_RAYS_PER_BATCH = 1_500_000
 # A flat triangle in the raster under EXACT_SHARE_MIN_PIXELS of projected area but not of its own,
-# with at most this fraction of it projected (seen within 14.5 deg of edge-on), is a sliver,
-# sampled at the centroids of SLIVER_SUBDIVISION squared equal parts of it
+# with at most this fraction of it projected (seen within 14.5 deg of edge-on), is a sliver
+# (sliver_areas), sampled at the centroids of SLIVER_SUBDIVISION squared equal parts of it
 # (DirectRenderer._sliver_sums; 2 cost TOPEX 0.0051 instead of 0.0043 mag at 6 cm pixels).
 # Sampling costs 18 rays a sliver where a pixel count costs its few pixels: `python
 # bench/raster_slivers.py` measures both on TOPEX and on a finely cut flat-shaded sphere.
@@ -77,6 +77,16 @@ _TILE = 8
 class AccuracyOutOfReach(ValueError):
     """The requested accuracy needs more rays per frame than allowed (a glint or shadow edge
     narrower than the finest sampling)."""
+
+
+def sliver_areas(own_pixels, smooth):
+    """(t,) float, the projected area in pixels at or under which each triangle is a sliver in
+    the raster: ``SLIVER_COSINE`` of its own area ``own_pixels`` for a flat triangle of at least
+    ``EXACT_SHARE_MIN_PIXELS`` of it, 0 (never) for the others (``smooth`` (t,) bool: smooth-shaded
+    hits are shaded one by one, with no share). The raster takes a triangle under
+    ``EXACT_SHARE_MIN_PIXELS`` of projected area for a sliver when it is also under this."""
+    large = ~smooth & (own_pixels >= _direct_kernels.EXACT_SHARE_MIN_PIXELS)
+    return np.where(large, SLIVER_COSINE * own_pixels, 0.0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -284,6 +294,7 @@ class DirectRenderer:
         flat_table = self._flat_radiance(sun_body, obs_body, np.flatnonzero(~smooth))
         offset = 1e-4 * max(mesh.radius_m, 1.0)
         corners = mesh.corners_m
+        sliver_below = sliver_areas(mesh.areas_m2 / (h * h), smooth)
         # Sorting out the hits that need no shadow ray pays where closed convex parts hold most
         # of the surface (TOPEX: 70% of the rays saved); on open meshes nearly every hit needs one.
         if "groups" not in self._state:
@@ -320,10 +331,10 @@ class DirectRenderer:
                 obs_body,
                 sun_body,
                 offset,
-                SLIVER_COSINE,
+                sliver_below,
             )
             begin = end
-            self._sliver_sums(mesh, scene, *slivers, sun_body, obs_body, flat_table, result)
+            self._sliver_sums(mesh, scene, *slivers, sun_body, obs_body, offset, flat_table, result)
             if len(frames) == 0:
                 continue
             if groups is None:  # every hit casts its ray
@@ -353,20 +364,17 @@ class DirectRenderer:
                 )
         return result * h * h
 
-    def _sliver_sums(self, mesh, scene, frames, prim, pixels, sun_body, obs_body, flat_table, out):
+    def _sliver_sums(self, mesh, scene, frames, prim, pixels, sun_body, obs_body, offset, flat_table, out):
         """Add the flat-shaded slivers of :func:`raycast.renderer._direct_kernels.raster_hits`
         (under ``EXACT_SHARE_MIN_PIXELS`` of projected area, not of their own) to ``out[frame]``,
         in pixels: each one's table radiance times its exact projected area ``pixels`` times the
         fraction of the points of its surface (:data:`SLIVER_SUBDIVISION` squared) that are both
         seen and lit (:func:`raycast.renderer._direct_kernels.sliver_rays`). A strip that thin
         can fall between the pixel centres, so its hits say little of it; its own surface says
-        how much of it is seen and lit."""
-        flat = ~self._state["smooth"][prim]
-        frames, prim, pixels = frames[flat], prim[flat], pixels[flat]
+        how much of it is seen and lit. ``offset``: how far above its surface the rays start."""
         if len(frames) == 0:
             return
         n = SLIVER_SUBDIVISION
-        offset = 1e-4 * max(mesh.radius_m, 1.0)
         rays = _direct_kernels.sliver_rays(
             mesh.corners_m, mesh.face_normals, obs_body, sun_body, frames, prim, offset, n
         )
