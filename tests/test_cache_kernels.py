@@ -5,6 +5,7 @@ import pytest
 from scipy import sparse
 
 from raycast.renderer import _cache_kernels
+from raycast.renderer.cache import cube_grid_directions, cube_grid_weights
 from raycast.renderer.rays import SUN_RADIUS_SINE, sun_fractions
 
 
@@ -101,14 +102,23 @@ def test_byte_areas_sum_the_set_elements_of_bytes_in_one_group():
 
 
 @pytest.mark.parametrize(
-    "n_extra, n_groups, n_classes, straddling",
-    [(0, 7, 4, None), (3, 7, 4, None), (3, 150, 20, None), (0, 7, 4, 0.1), (1, 2, 2, 0.0)],
+    "n_extra, n_groups, n_classes, straddling, coarse",
+    [
+        (0, 7, 4, None, False),
+        (3, 7, 4, None, False),
+        (3, 150, 20, None, False),
+        (0, 7, 4, 0.1, False),
+        (1, 2, 2, 0.0, False),
+        (3, 150, 20, None, True),
+    ],
 )
-def test_lit_classes_sum_gated_group_areas_into_sorted_classes(n_extra, n_groups, n_classes, straddling):
+def test_lit_classes_sum_gated_group_areas_into_sorted_classes(n_extra, n_groups, n_classes, straddling, coarse):
     """Agreed bits, the mixed pairs' open fractions, exposed areas and factorised weights, gated
     by each group's geometric normal and summed into its class, against the same in numpy.
     150 groups span three words of the kernel's bitmap of groups with area. With elements in
-    long runs of one group, some words are read a byte at a time from :func:`byte_areas`' tables."""
+    long runs of one group, some words are read a byte at a time from :func:`byte_areas`' tables.
+    With coarse levels, a class whose nominal normal is far from the frame's half vector is
+    summed into its coarse class instead (two levels: pairs, then fours of classes)."""
     case = _case(5, n_elements=130, n_frames=25, n_groups=n_groups, straddling=straddling)
     bits, sun_nodes, obs_nodes, _, _, normals, area = case
     rng = np.random.default_rng(6)
@@ -129,6 +139,15 @@ def test_lit_classes_sum_gated_group_areas_into_sorted_classes(n_extra, n_groups
     tables = _cache_kernels.byte_areas(area.indptr, area.indices, area.data, -(-len(normals) // 64))
     by_bytes = (tables[0].reshape(-1, 8) >= 0).all(axis=1)[:2]  # (the last word is part padding)
     assert by_bytes.any() == (straddling == 0.0)
+    class_normal = _unit(rng.normal(size=(n_classes, 3))).astype(np.float32)
+    classes = np.arange(n_classes)
+    if coarse:
+        first_four = n_classes + -(-n_classes // 2)
+        class_target = np.stack([n_classes + classes // 2, first_four + classes // 4]).astype(np.int32)
+        n_targets = first_four + -(-n_classes // 4)
+        coarse_cos = np.array([[0.5, -0.2]])
+    else:
+        class_target, n_targets, coarse_cos = np.zeros((0, n_classes), np.int32), n_classes, np.zeros((1, 0))
     out = _cache_kernels.lit_classes(
         _cache_kernels.pack_words(bits),
         sun_nodes,
@@ -149,6 +168,11 @@ def test_lit_classes_sum_gated_group_areas_into_sorted_classes(n_extra, n_groups
         sun,
         obs,
         n_classes,
+        class_normal,
+        np.zeros(n_targets, dtype=np.int32),
+        coarse_cos,
+        class_target,
+        n_targets,
     )
     both = bits[sun_nodes].all(axis=1) & bits[obs_nodes].all(axis=1)  # (m, e)
     weight = (area @ both.T.astype(np.float64)).T + area_exposed
@@ -158,20 +182,30 @@ def test_lit_classes_sum_gated_group_areas_into_sorted_classes(n_extra, n_groups
     weight[:, extra_groups] += extra
     cos_o, cos_s = obs @ normal_geo.T, sun @ normal_geo.T
     gated = weight * np.where(cos_o > 0, cos_o, 0.0) * sun_fractions(cos_s)  # (m, g)
-    one_hot = np.eye(n_classes)[group_class]  # (g, c)
-    ref_area = gated @ one_hot
+    # Each frame's class -> its class or coarse class (levels by the cosine to the half vector).
+    cos_h = _unit(sun + obs) @ class_normal.T  # (m, c)
+    level = sum((cos_h < coarse_cos[0, k]).astype(int) for k in range(coarse_cos.shape[1])) + np.zeros(cos_h.shape, int)
+    target = np.where(level == 0, classes, np.r_[[classes], class_target][level, classes])
+    assert not coarse or 0 < np.count_nonzero(level) < level.size
+    one_hot = np.eye(n_targets)[target[:, group_class]]  # (m, g, t)
+    ref_area = np.einsum("mg,mgt->mt", gated, one_hot)
     lit = np.nonzero(ref_area > 0)
     unit = lambda a: a / np.linalg.norm(a, axis=-1, keepdims=True)
-    ref_normal = unit(np.einsum("mg,gc,gk->mck", gated, one_hot, normal_shade))[lit]
-    ref_geo = unit(np.einsum("mg,gc,gk->mck", gated, one_hot, normal_geo))[lit]
+    ref_normal = unit(np.einsum("mg,mgt,gk->mtk", gated, one_hot, normal_shade))[lit]
+    ref_geo = unit(np.einsum("mg,mgt,gk->mtk", gated, one_hot, normal_geo))[lit]
     got_frames, got_classes, got_area, got_normal, got_geo = out
+    # Rows come in frame order, a frame's own classes before its coarse ones in the order first met.
+    order = np.lexsort((got_classes, got_frames))
+    got_frames, got_classes, got_area, got_normal, got_geo = (a[order] for a in out)
     np.testing.assert_array_equal(got_frames, lit[0])
     np.testing.assert_array_equal(got_classes, lit[1])
+    assert not coarse or np.any(got_classes >= n_classes)
     # float32 inputs summed in float64: agreement to float32 rounding.
     np.testing.assert_allclose(got_area, ref_area[lit], rtol=1e-5)
     np.testing.assert_allclose(got_normal, ref_normal, atol=1e-5)
     np.testing.assert_allclose(got_geo, ref_geo, atol=1e-5)
     assert 0 < len(got_frames) < m * n_classes
+    np.testing.assert_array_equal(out[0], np.sort(out[0]))
     assert np.any((sun_fractions(cos_s) > 0) & (sun_fractions(cos_s) < 1))
 
 
@@ -191,7 +225,64 @@ def test_rays_and_open_fractions_follow_the_pairs_needs():
         np.testing.assert_array_equal(rays[row, :3], origins[e, j])
         np.testing.assert_array_equal(rays[row, 3:], d)
     occluded = np.array([True, False, False, False, False, True, True, True])
-    np.testing.assert_allclose(_cache_kernels.open_fraction(need, occluded, 2), [0.5, 0.5, 0.0])
+    blend = np.full(3, -1.0, dtype=np.float32)
+    np.testing.assert_allclose(_cache_kernels.open_fraction(need, occluded, 2, blend), [0.5, 0.5, 0.0])
+    # A pair left to its bits' interpolation (far_pairs: need 0, no rays) takes its blend.
+    need[1], blend[1] = 0, 0.25
+    occluded = np.delete(occluded, [4, 5])  # pair 1's observer rays are not cast
+    np.testing.assert_allclose(_cache_kernels.open_fraction(need, occluded, 2, blend), [0.5, 0.25, 0.0])
+
+
+def test_nearest_lobes_and_far_pairs_against_numpy():
+    """The nearest lobed class to each half vector (facing the Sun and the observer), and the
+    pairs whose element lies further than its reach beyond it: no ray, its bits' bilinear
+    interpolation instead."""
+    rng = np.random.default_rng(21)
+    m, n_classes, n_elements = 30, 200, 100
+    sun, obs = _unit(rng.normal(size=(m, 3))), _unit(rng.normal(size=(m, 3)))
+    class_normal = _unit(rng.normal(size=(n_classes, 3))).astype(np.float32)
+    lobed = rng.random(n_classes) < 0.7
+    nearest = _cache_kernels.nearest_lobes(class_normal, lobed, sun, obs)
+    half = _unit(sun + obs)
+    facing = (sun @ class_normal.T > 0) & (obs @ class_normal.T > 0) & lobed
+    cos_h = np.where(facing, half @ class_normal.T, -1.0)
+    np.testing.assert_allclose(nearest, np.arccos(cos_h.max(axis=1)), atol=1e-5)
+    bits = rng.random((6 * 5 * 5, n_elements)) < 0.6
+    directions = cube_grid_directions(4)
+    assert len(directions) == len(bits)
+    (sun_nodes, sun_w), (obs_nodes, obs_w) = (cube_grid_weights(d, 4) for d in (sun, obs))
+    sun_nodes, obs_nodes = sun_nodes.astype(np.int64), obs_nodes.astype(np.int64)
+    frames = np.repeat(np.arange(m), 20)
+    elements = rng.integers(0, n_elements, len(frames))
+    need = rng.integers(1, 4, len(frames)).astype(np.uint8)
+    element_normal = _unit(rng.normal(size=(n_elements, 3))).astype(np.float32)
+    reach = np.where(rng.random(n_elements) < 0.8, rng.uniform(0.0, 1.0, n_elements), -1.0)
+    far = np.column_stack([reach, np.cos(reach), np.sin(reach)]).astype(np.float32)
+    kept, blend = _cache_kernels.far_pairs(
+        need,
+        frames,
+        elements,
+        _cache_kernels.pack_words(bits),
+        sun_nodes,
+        sun_w,
+        obs_nodes,
+        obs_w,
+        element_normal,
+        far,
+        sun,
+        obs,
+        nearest,
+    )
+    angle = np.arccos(np.clip(np.einsum("ij,ij->i", element_normal[elements], half[frames]), -1, 1))
+    skipped = (reach[elements] >= 0) & (angle > reach[elements] + nearest[frames] + 1e-4)
+    kept_too = (reach[elements] < 0) | (angle < reach[elements] + nearest[frames] - 1e-4)
+    assert 0.2 < skipped.mean() < 0.8
+    assert np.all(blend[skipped] >= 0) and np.all(kept[skipped] == 0)
+    np.testing.assert_array_equal(blend[kept_too], -1.0)
+    np.testing.assert_array_equal(kept[kept_too], need[kept_too])
+    toward_sun = (sun_w[frames] * bits[sun_nodes[frames], elements[:, None]]).sum(axis=1)
+    toward_obs = (obs_w[frames] * bits[obs_nodes[frames], elements[:, None]]).sum(axis=1)
+    np.testing.assert_allclose(blend[skipped], (toward_sun * toward_obs)[skipped], atol=1e-6)
 
 
 def test_lowest_bit_is_the_index_of_the_lowest_set_bit():

@@ -249,6 +249,11 @@ def lit_classes(
     sun,
     obs,
     n_classes,
+    class_normal,
+    class_material,
+    coarse_cos,
+    class_target,
+    n_targets,
 ):
     """Each frame's shading classes with light: their lit, seen and projected area and normals.
 
@@ -266,9 +271,16 @@ def lit_classes(
     pairs or factors touched (a bitmap of groups; the all-Glossy paper mesh has 138 625 groups
     and a frame lights a fraction of them).
 
+    A class far from the frame's half vector is summed into a coarser one instead (its level
+    ``l`` is the number of ``coarse_cos[class_material[c]]`` above the cosine of its nominal
+    ``class_normal`` to the half vector, its coarse class ``class_target[l - 1, c]``; numbers
+    from ``n_classes`` up to ``n_targets``), which is shaded once for all of them
+    (``raycast.renderer.cache._coarse_classes``).
+
     Returns
     -------
-    frames, classes : (k,) int64, the (frame, class) pairs with light, in frame order.
+    frames, classes : (k,) int64, the (frame, class) pairs with light, in frame order; a
+        coarse class's number is its target's.
     area : (k,) float64, the class's gated area.
     normal, geo : (k, 3) float64, its groups' shading and geometric normals weighted by their
         gated areas, normalised.
@@ -284,6 +296,10 @@ def lit_classes(
     out_geo = np.empty((capacity, 3))
     count = 0
     zero, one = np.uint64(0), np.uint64(1)
+    n_levels = class_target.shape[0]
+    # Coarse classes' sums this frame (total, shading normal, geometric normal), and which have any.
+    coarse = np.zeros((n_targets, 7))
+    coarse_used = np.empty(max(n_targets - n_classes, 0), dtype=np.int64)
     # Groups with area this frame, a bit each: the exposed ones always, the others as touched.
     n_group_words = (n_groups + 63) // 64
     exposed = np.zeros(n_group_words, dtype=np.uint64)
@@ -368,6 +384,13 @@ def lit_classes(
             out_geo = grown(out_geo, capacity, count)
         sx, sy, sz = sun[f, 0], sun[f, 1], sun[f, 2]
         ox, oy, oz = obs[f, 0], obs[f, 1], obs[f, 2]
+        hx, hy, hz = sx + ox, sy + oy, sz + oz
+        h_norm = math.sqrt(hx * hx + hy * hy + hz * hz)
+        # Backlit to within 1e-6: no half vector, every class at its own level.
+        levels = n_levels if h_norm > 1e-6 else 0
+        if levels:
+            hx, hy, hz = hx / h_norm, hy / h_norm, hz / h_norm
+        n_used = 0
         # Groups come sorted by class (SceneCache.build): each class is summed in one run.
         current = -1
         total, nx, ny, nz, gx_sum, gy_sum, gz_sum = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
@@ -388,14 +411,47 @@ def lit_classes(
             c = group_class[g] if g < n_groups else -2
             if c != current:
                 if total > 0.0:
-                    norm = math.sqrt(nx * nx + ny * ny + nz * nz)
-                    geo_norm = math.sqrt(gx_sum * gx_sum + gy_sum * gy_sum + gz_sum * gz_sum)
-                    out_frames[count], out_classes[count], out_area[count] = f, current, total
-                    out_normal[count, 0], out_normal[count, 1], out_normal[count, 2] = nx / norm, ny / norm, nz / norm
-                    out_geo[count, 0] = gx_sum / geo_norm
-                    out_geo[count, 1] = gy_sum / geo_norm
-                    out_geo[count, 2] = gz_sum / geo_norm
-                    count += 1
+                    level = 0
+                    if levels:
+                        cos_h = (
+                            class_normal[current, 0] * hx
+                            + class_normal[current, 1] * hy
+                            + class_normal[current, 2] * hz
+                        )
+                        material = class_material[current]
+                        while level < levels and cos_h < coarse_cos[material, level]:
+                            level += 1
+                    if level == 0:
+                        _put_row(
+                            out_frames,
+                            out_classes,
+                            out_area,
+                            out_normal,
+                            out_geo,
+                            count,
+                            f,
+                            current,
+                            total,
+                            nx,
+                            ny,
+                            nz,
+                            gx_sum,
+                            gy_sum,
+                            gz_sum,
+                        )
+                        count += 1
+                    else:
+                        t = class_target[level - 1, current]
+                        if coarse[t, 0] == 0.0:
+                            coarse_used[n_used] = t
+                            n_used += 1
+                        coarse[t, 0] += total
+                        coarse[t, 1] += nx
+                        coarse[t, 2] += ny
+                        coarse[t, 3] += nz
+                        coarse[t, 4] += gx_sum
+                        coarse[t, 5] += gy_sum
+                        coarse[t, 6] += gz_sum
                 current = c
                 total, nx, ny, nz, gx_sum, gy_sum, gz_sum = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
             if g == n_groups:
@@ -418,7 +474,40 @@ def lit_classes(
             gx_sum += w * gx
             gy_sum += w * gy
             gz_sum += w * gz
+        for i in range(n_used):
+            t = coarse_used[i]
+            a = coarse[t]
+            _put_row(
+                out_frames,
+                out_classes,
+                out_area,
+                out_normal,
+                out_geo,
+                count,
+                f,
+                t,
+                a[0],
+                a[1],
+                a[2],
+                a[3],
+                a[4],
+                a[5],
+                a[6],
+            )
+            count += 1
+            a[:] = 0.0
     return out_frames[:count], out_classes[:count], out_area[:count], out_normal[:count], out_geo[:count]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _put_row(frames, classes, area, normal, geo, row, f, c, total, nx, ny, nz, gx, gy, gz):
+    """Row ``row`` of :func:`lit_classes`' output: frame f's class c, its gated area and its
+    area-weighted normal sums, normalised."""
+    norm = math.sqrt(nx * nx + ny * ny + nz * nz)
+    geo_norm = math.sqrt(gx * gx + gy * gy + gz * gz)
+    frames[row], classes[row], area[row] = f, c, total
+    normal[row, 0], normal[row, 1], normal[row, 2] = nx / norm, ny / norm, nz / norm
+    geo[row, 0], geo[row, 1], geo[row, 2] = gx / geo_norm, gy / geo_norm, gz / geo_norm
 
 
 @njit(cache=True, nogil=True)
@@ -459,9 +548,98 @@ def pair_rays(need, frames, elements, origins, normals, sun, obs):
 
 
 @njit(cache=True, nogil=True)
-def open_fraction(need, occluded, k):
+def nearest_lobes(class_normal, class_lobed, sun, obs):
+    """(m,) float64: each frame's smallest angle between its half vector and the nominal
+    normal of a class of a pure-lobe material (``class_lobed``) facing both the Sun and the
+    observer; pi where there is none (or no half vector)."""
+    m = len(sun)
+    angle = np.full(m, math.pi)
+    for f in range(m):
+        sx, sy, sz = sun[f, 0], sun[f, 1], sun[f, 2]
+        ox, oy, oz = obs[f, 0], obs[f, 1], obs[f, 2]
+        hx, hy, hz = sx + ox, sy + oy, sz + oz
+        h_norm = math.sqrt(hx * hx + hy * hy + hz * hz)
+        if h_norm <= 1e-6:
+            continue
+        hx, hy, hz = hx / h_norm, hy / h_norm, hz / h_norm
+        best = -1.0
+        for c in range(len(class_normal)):
+            nx, ny, nz = class_normal[c, 0], class_normal[c, 1], class_normal[c, 2]
+            cos_h = nx * hx + ny * hy + nz * hz
+            # The facing tests only for a class nearer than the nearest so far.
+            if cos_h <= best or not class_lobed[c]:
+                continue
+            if nx * sx + ny * sy + nz * sz > 0.0 and nx * ox + ny * oy + nz * oz > 0.0:
+                best = cos_h
+        if best > -1.0:
+            angle[f] = math.acos(min(best, 1.0))
+    return angle
+
+
+@njit(cache=True, nogil=True)
+def far_pairs(
+    need,
+    frames,
+    elements,
+    words,
+    sun_nodes,
+    sun_weights,
+    obs_nodes,
+    obs_weights,
+    element_normal,
+    far,
+    sun,
+    obs,
+    nearest,
+):
+    """The pairs no exact ray needs to decide: their element's normals are all further from the
+    frame's half vector than ``far[:, 0]`` (e, 3: the angle, its cosine and its sine) beyond the
+    frame's ``nearest`` lobe (:func:`nearest_lobes`; an angle < 0: never). Such a pair is
+    counted by the bilinear interpolation of its bits toward the Sun times toward the observer
+    instead.
+
+    Returns
+    -------
+    need : (p,) uint8, the pairs' ``need`` with the skipped ones' cleared (no ray is cast).
+    blend : (p,) float32, the skipped pairs' interpolated visibility, -1 for the others.
+    """
+    p, m = len(need), len(sun)
+    kept = need.copy()
+    blend = np.full(p, -1.0, dtype=np.float32)
+    one = np.uint64(1)
+    half = np.zeros((m, 3))
+    near_cos, near_sin = np.empty(m), np.empty(m)
+    for f in range(m):
+        hx, hy, hz = sun[f, 0] + obs[f, 0], sun[f, 1] + obs[f, 1], sun[f, 2] + obs[f, 2]
+        h_norm = math.sqrt(hx * hx + hy * hy + hz * hz)
+        if h_norm > 1e-6:
+            half[f, 0], half[f, 1], half[f, 2] = hx / h_norm, hy / h_norm, hz / h_norm
+        near_cos[f], near_sin[f] = math.cos(nearest[f]), math.sin(nearest[f])
+    for i in range(p):
+        e, f = elements[i], frames[i]
+        if far[e, 0] < 0.0 or far[e, 0] + nearest[f] >= math.pi:
+            continue
+        cos_h = (
+            element_normal[e, 0] * half[f, 0] + element_normal[e, 1] * half[f, 1] + element_normal[e, 2] * half[f, 2]
+        )
+        # cos(far + nearest), the largest cosine a pair without a ray may have.
+        if cos_h >= far[e, 1] * near_cos[f] - far[e, 2] * near_sin[f]:
+            continue
+        w, shift = e >> 6, np.uint64(e & 63)
+        toward_sun, toward_obs = 0.0, 0.0
+        for j in range(4):
+            toward_sun += sun_weights[f, j] * ((words[sun_nodes[f, j], w] >> shift) & one)
+            toward_obs += obs_weights[f, j] * ((words[obs_nodes[f, j], w] >> shift) & one)
+        blend[i] = toward_sun * toward_obs
+        kept[i] = 0
+    return kept, blend
+
+
+@njit(cache=True, nogil=True)
+def open_fraction(need, occluded, k, blend):
     """(p,) float32: the fraction of each pair's k points with both rays open, from the
-    ``occluded`` flags of :func:`pair_rays`' rays (pairs without a ray are open that way)."""
+    ``occluded`` flags of :func:`pair_rays`' rays (pairs without a ray are open that way), or
+    the pair's ``blend`` where it is not negative (:func:`far_pairs`)."""
     n = len(need)
     sun_row = 0
     obs_row = 0
@@ -476,7 +654,7 @@ def open_fraction(need, occluded, k):
                 count += 1
         sun_row += k * toward_sun
         obs_row += k * toward_obs
-        fraction[i] = count / k
+        fraction[i] = blend[i] if blend[i] >= 0.0 else count / k
     return fraction
 
 

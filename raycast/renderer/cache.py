@@ -99,6 +99,17 @@ _MIN_FRAMES_PER_THREAD = 32
 _SPLIT_FRACTION = 0.05
 # Directions (rows of a group's factor matrix) taken at a time where a factorisation is tried.
 _DIRECTION_ROWS = 512
+# A shading class of a lobed material is merged into coarser bins (2, 4, ... times its own) in a
+# frame where the bin is at most this fraction of its normal's angle from the half vector: there
+# the lobe's tail varies slowly across the bin, and a smooth surface's classes tile it as a
+# midpoint rule does (see _coarse_classes and docs/renderer.md).
+_COARSE_BIN_RATIO = 1.0 / 6.0
+# Coarse bins stop at the bin of a diffuse material (its step over the bins per step).
+_DIFFUSE_STEP_DEG = 15.0
+# A mixed (element, frame) pair of a pure-lobe material gets no exact ray where all its normals
+# are more than this many lobe widths further from the half vector than the frame's nearest
+# lobed class: its bits' bilinear interpolation counts it (see _far_elements).
+_FAR_LOBES = 4.0
 
 
 def cube_grid_directions(grid_size):
@@ -249,7 +260,14 @@ class _Pose:
     n_elements: int
     n_occludable: int  # occludable elements before factorisation
     n_rays: int
-    material_blocks: tuple  # (material, first class, end class) per material, classes in order
+    class_normal: np.ndarray  # (c, 3) float32: each class's nominal shading normal (area-weighted mean)
+    class_lobed: np.ndarray  # (c,) bool: its material is a pure lobe (_pure_lobe)
+    class_target: np.ndarray  # (l, c) int32: its coarse class at each coarser level (_coarse_classes)
+    coarse_cos: np.ndarray  # (materials, l) float64: cosines to the half vector below which a level is taken
+    target_material: np.ndarray  # (n_targets,) int32: the material of each class, then of each coarse class
+    element_normal: np.ndarray  # (e, 3) float32: the bit-held elements' area-weighted mean shading normal
+    element_far: np.ndarray  # (e, 3) float32: how far beyond the nearest lobe a pair needs no ray (-1: always
+    # one), its cosine and sine
 
 
 @dataclass(frozen=True, eq=False)
@@ -356,7 +374,9 @@ class SceneCache:
             [_normal_quantum_rad(b, step, normal_step_deg, normal_bins_per_step) for b, step in zip(scene.brdfs, steps)]
         )
         sizes = (element_size_m, glossy_element_m)
-        poses = tuple(_build_pose(s, directions, sizes, steps, quanta, tolerance, progress) for s in scenes)
+        # Coarse shading classes stop at a diffuse material's bin (_coarse_classes).
+        cap = _normal_quantum_rad(None, math.radians(_DIFFUSE_STEP_DEG), None, normal_bins_per_step)
+        poses = tuple(_build_pose(s, directions, sizes, steps, quanta, cap, tolerance, progress) for s in scenes)
         return cls(
             scene,
             poses,
@@ -445,8 +465,9 @@ class SceneCache:
         bend = self.scene.specular_normals == "cycles"
         sun_u, sun_v = orthonormal_basis(sun)
         per_pair = [np.ascontiguousarray(a, dtype=float) for a in (area, normal, geo)]
-        for material, begin, end in pose.material_blocks:
-            rows = np.flatnonzero((classes >= begin) & (classes < end))
+        of_row = pose.target_material[classes]
+        for material in np.unique(of_row):
+            rows = np.flatnonzero(of_row == material)
             shaded_pairs(
                 self.scene.brdfs[material],
                 self.sun_samples[material],
@@ -610,14 +631,18 @@ class _Frames:
     obs32: np.ndarray
     sun_nodes: np.ndarray  # (m, 4) int64, the cube-map nodes around each direction
     obs_nodes: np.ndarray
+    sun_weights: np.ndarray  # (m, 4) float64, their bilinear weights
+    obs_weights: np.ndarray
 
     @classmethod
     def of(cls, sun, obs, grid_size):
         # Once for the whole light curve: per batch, numpy's call overhead was ~4 ms of a whole
         # TOPEX pass's 140 ms (19 batches of 256 frames).
-        nodes = (cube_grid_weights(d, grid_size)[0].astype(np.int64) for d in (sun, obs))
+        (sun_nodes, sun_weights), (obs_nodes, obs_weights) = (cube_grid_weights(d, grid_size) for d in (sun, obs))
         thin = (np.ascontiguousarray(d, dtype=np.float32) for d in (sun, obs))
-        return cls(sun, obs, *thin, *nodes)
+        nodes = (n.astype(np.int64) for n in (sun_nodes, obs_nodes))
+        weights = (np.ascontiguousarray(w, dtype=float) for w in (sun_weights, obs_weights))
+        return cls(sun, obs, *thin, *nodes, *weights)
 
     def __getitem__(self, sl):
         return _Frames(*(getattr(self, f.name)[sl] for f in dataclasses.fields(self)))
@@ -629,7 +654,8 @@ class _FramePairs:
 
     frames: np.ndarray  # (p,) int64, in frame order
     elements: np.ndarray  # (p,) int64
-    need: np.ndarray  # (p,) uint8, see raycast.renderer._cache_kernels.mixed_pairs
+    need: np.ndarray  # (p,) uint8, see raycast.renderer._cache_kernels.mixed_pairs (0 where blended)
+    blend: np.ndarray  # (p,) float32, the interpolated visibility of pairs far from every lobe, -1 for the others
     rays: np.ndarray  # (r, 6) float32, raycast.renderer._cache_kernels.pair_rays
 
 
@@ -643,11 +669,14 @@ def _pairs_to_decide(pose, batch, origins):
     (e, k, 3) (:func:`_ray_origins`; :func:`_lit_classes` counts the element by the fraction
     of them both lit and seen, as the direct renderer's shadow rays). Elements facing away from
     the exact Sun or observer get no rays. So do pairs near a gap in the bits narrower than the
-    grid (:func:`_horizon_gaps`).
+    grid (:func:`_horizon_gaps`). Pairs whose element's pure-lobe normals are all far from the
+    frame's half vector get none either: the interpolation of their bits counts them
+    (:func:`_far_elements`, :func:`raycast.renderer._cache_kernels.far_pairs`).
     """
     sun32, obs32, sun_nodes, obs_nodes = batch.sun32, batch.obs32, batch.sun_nodes, batch.obs_nodes
     frames, elements = np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     need, rays = np.zeros(0, dtype=np.uint8), np.zeros((0, 6), dtype=np.float32)
+    blend = np.zeros(0, dtype=np.float32)
     if pose.raw_count:
         frames, elements, need = _cache_kernels.mixed_pairs(
             pose.raw_bits, sun_nodes, obs_nodes, sun32, obs32, pose.raw_normals
@@ -667,9 +696,27 @@ def _pairs_to_decide(pose, batch, origins):
             if len(gap[0]):
                 order = np.argsort(np.r_[frames, gap[0]], kind="stable")
                 frames, elements, need = (np.r_[a, b][order] for a, b in zip((frames, elements, need), gap))
+        blend = np.full(len(frames), -1.0, dtype=np.float32)
+        if len(frames) and np.any(pose.element_far[:, 0] >= 0.0):
+            nearest = _cache_kernels.nearest_lobes(pose.class_normal, pose.class_lobed, batch.sun, batch.obs)
+            need, blend = _cache_kernels.far_pairs(
+                need,
+                frames,
+                elements,
+                pose.raw_bits,
+                sun_nodes,
+                batch.sun_weights,
+                obs_nodes,
+                batch.obs_weights,
+                pose.element_normal,
+                pose.element_far,
+                batch.sun,
+                batch.obs,
+                nearest,
+            )
         if len(frames):
             rays = _cache_kernels.pair_rays(need, frames, elements, origins, pose.raw_normals, sun32, obs32)
-    return _FramePairs(frames, elements, need, rays)
+    return _FramePairs(frames, elements, need, blend, rays)
 
 
 def _occluded(pose, rays, threads):
@@ -696,7 +743,7 @@ def _lit_classes(pose, frames, grid_size, pairs, occluded, k):
     area = pose.raw_area
     open_ = np.zeros(0, dtype=np.float32)
     if len(pairs.frames):
-        open_ = _cache_kernels.open_fraction(pairs.need, occluded, k)
+        open_ = _cache_kernels.open_fraction(pairs.need, occluded, k, pairs.blend)
     factor_weight = np.zeros((m, 0), dtype=np.float32)
     if pose.factors.shape[1]:
         product = _interpolation_matrix(frames.sun, grid_size, len(pose.factors)) @ pose.factors
@@ -722,6 +769,11 @@ def _lit_classes(pose, frames, grid_size, pairs, occluded, k):
         frames.sun32,
         frames.obs32,
         pose.n_classes,
+        pose.class_normal,
+        pose.target_material,
+        pose.coarse_cos,
+        pose.class_target,
+        len(pose.target_material),
     )
 
 
@@ -763,7 +815,9 @@ def _normal_quantum_rad(brdf, step_rad, normal_step_deg, bins_per_step=_NORMAL_B
     return max(step_rad / bins_per_step, brdf.lobe_width_rad / 2.0)
 
 
-def _build_pose(scene, directions, element_sizes_m, normal_step_rad, normal_quantum_rad, factor_tolerance, progress):
+def _build_pose(
+    scene, directions, element_sizes_m, normal_step_rad, normal_quantum_rad, coarse_cap_rad, factor_tolerance, progress
+):
     mesh = scene.posed()
     element_size_m, glossy_element_m = element_sizes_m
     size_m = np.full(len(mesh.face_normals), element_size_m)
@@ -861,13 +915,23 @@ def _build_pose(scene, directions, element_sizes_m, normal_step_rad, normal_quan
     # Shading classes: material and binned shading normal, shared by every face. The BRDF is
     # evaluated once per class and frame; a smooth-shaded tube's normals then fall into a ring
     # of classes instead of (faces x bins).
-    shade_class, _ = _row_ids(
-        len(quantum),
-        itertools.chain([el["material"]], (np.round(el["normal"][:, k] / quantum[:, 0]) for k in range(3))),
-    )
+    key = np.column_stack([np.round(el["normal"][:, k] / quantum[:, 0]) for k in range(3)]).astype(np.int64)
+    shade_class, _ = _row_ids(len(quantum), itertools.chain([el["material"]], key.T))
     n_classes = int(shade_class.max()) + 1 if len(shade_class) else 0
     class_material = np.zeros(n_classes, dtype=np.int64)
     class_material[shade_class] = el["material"]
+    class_key = np.zeros((n_classes, 3), dtype=np.int64)
+    class_key[shade_class] = key
+    class_normal = np.column_stack(
+        [np.bincount(shade_class, weights=el["normal"][:, k] * weight_area, minlength=n_classes) for k in range(3)]
+    )
+    class_normal /= np.linalg.norm(class_normal, axis=1, keepdims=True)
+    del key
+    lobes = np.array([b.lobe_width_rad or 0.0 for b in scene.brdfs])
+    class_target, target_material, coarse_cos = _coarse_classes(
+        class_key, class_material, normal_quantum_rad, lobes, coarse_cap_rad
+    )
+    class_lobed = np.array([_pure_lobe(b) for b in scene.brdfs], dtype=bool)[class_material]
     # Class first in the key, so np.unique sorts the groups by class (each class is summed in
     # one run at run time, _cache_kernels.lit_classes) and so into one block per material.
     group, counts = _row_ids(
@@ -899,10 +963,6 @@ def _build_pose(scene, directions, element_sizes_m, normal_step_rad, normal_quan
         visibility, len(directions), row_of[pairs[:, 1]], pair_area, starts, factor_tolerance
     )
 
-    # Classes are numbered in material order (material leads their key): one block each.
-    bounds = np.flatnonzero(np.r_[True, np.diff(class_material) != 0, True])
-    blocks = tuple((int(class_material[a]), int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:]))
-
     factor_groups = pairs[starts[factorised], 0] if len(pairs) else np.zeros(0, int)
     # The other groups keep their elements' visibility as bits, and each (group, element)
     # pair's area: an (elements, groups) sparse matrix.
@@ -923,6 +983,9 @@ def _build_pose(scene, directions, element_sizes_m, normal_step_rad, normal_quan
         shape=(n_groups, len(raw_columns)),
     )
     raw_area.sort_indices()
+    element_normal, element_far = _far_elements(
+        raw_area, normal_shade, group_class, class_lobed, normal_quantum_rad[class_material], lobes[class_material]
+    )
     raw_geo, raw_corners = parent_geo[raw_columns], el_corners[raw_columns]
     # Let go of all but what the bits are made from before they are: here the visibility and its
     # bits are both held, the build's peak on a glossy mesh.
@@ -968,8 +1031,102 @@ def _build_pose(scene, directions, element_sizes_m, normal_step_rad, normal_quan
         n_groups + n_pairs,
         n_pairs,
         n_rays + gap_rays,
-        blocks,
+        class_normal.astype(np.float32),
+        class_lobed,
+        class_target,
+        coarse_cos,
+        target_material,
+        element_normal,
+        element_far,
     )
+
+
+def _pure_lobe(brdf):
+    """Whether ``brdf`` is a specular lobe and nothing else (no diffuse part): far from its
+    half vector only the lobe's tail is left (a Mix of two such lobes is one too)."""
+    if not brdf.lobe_width_rad:
+        return False
+    parts = [getattr(brdf, name) for name in ("first", "second") if hasattr(brdf, name)]
+    if parts:
+        return all(_pure_lobe(part) for part in parts)
+    return brdf.lobe_share >= 1.0 - 1e-9
+
+
+def _coarse_classes(class_key, class_material, quantum_rad, lobe_rad, cap_rad):
+    """Coarser shading classes, for the frames where a class is far from the half vector.
+
+    A class is a cell of its material's normal quantum q (``class_key``: its normal over q,
+    rounded); at level l its cells merge 2^l to a side (the key floor-divided by 2^l), as long as
+    2^l q is at most ``cap_rad`` (a diffuse material's bin: a lobeless material, or a lobe's
+    diffuse base, is not binned coarser than that anywhere). At run time a class of a lobed
+    material joins its level-l cell where its nominal normal is at least 2^l q / ratio from the
+    frame's half vector (ratio _COARSE_BIN_RATIO; the cell's shading normal is its lit classes'
+    weighted mean, as a class's is of its groups).
+
+    Returns
+    -------
+    class_target : (l, c) int32, each class's coarse class at level 1..l, numbered from c up.
+    target_material : (n,) int32, each class's material, then each coarse class's.
+    coarse_cos : (materials, l) float64, the cosine to the half vector under which a class of
+        the material takes each level (-2: never).
+    """
+    n_classes = len(class_key)
+    with np.errstate(divide="ignore"):
+        levels = np.where(lobe_rad > 0.0, np.floor(np.log2(cap_rad / quantum_rad) + 1e-9), 0).clip(0, 6).astype(int)
+    n_levels = int(levels.max()) if len(levels) else 0
+    coarse_cos = np.full((len(quantum_rad), n_levels), -2.0)
+    for material, (count, q) in enumerate(zip(levels, quantum_rad)):
+        for level in range(1, count + 1):
+            angle = 2**level * q / _COARSE_BIN_RATIO
+            if angle < math.pi:
+                coarse_cos[material, level - 1] = math.cos(angle)
+    class_target = np.zeros((n_levels, n_classes), dtype=np.int32)
+    target_material = [class_material]
+    first = n_classes
+    for level in range(1, n_levels + 1):
+        cell = np.floor_divide(class_key, 2**level)
+        ids, counts = _row_ids(n_classes, itertools.chain([class_material], cell.T))
+        class_target[level - 1] = first + ids
+        material = np.zeros(len(counts), dtype=np.int64)
+        material[ids] = class_material
+        target_material.append(material)
+        first += len(counts)
+    return class_target, np.concatenate(target_material).astype(np.int32), coarse_cos
+
+
+def _far_elements(raw_area, normal_shade, group_class, class_lobed, class_quantum_rad, class_lobe_rad):
+    """Each bit-held element's mean shading normal and how far beyond the frame's nearest lobe
+    the half vector must be from it for its mixed pairs to need no exact ray.
+
+    Every group of the element must be of a pure-lobe material (:func:`_pure_lobe`); the reach
+    is the largest angle between the mean and its groups' normals, plus a class cell's
+    half-diagonal (sqrt(3)/2 q: a group's pieces lie in its cell), plus _FAR_LOBES lobe widths.
+    There the lobe's tail is what lights the element, and the bilinear interpolation of its
+    bits (a shadow or horizon edge smeared over a grid cell) is off by a share of that tail.
+
+    Returns
+    -------
+    element_normal : (e, 3) float32.
+    far : (e, 3) float32, that angle (-1 where the element always gets rays), its cosine and sine.
+    """
+    n = raw_area.shape[1]
+    if n == 0:
+        return np.zeros((0, 3), dtype=np.float32), np.zeros((0, 3), dtype=np.float32)
+    groups, ptr = raw_area.indices, raw_area.indptr
+    column = np.repeat(np.arange(n), np.diff(ptr))
+    normals = normal_shade.astype(float)
+    mean = np.column_stack(
+        [np.bincount(column, weights=raw_area.data * normals[groups, k], minlength=n) for k in range(3)]
+    )
+    mean /= np.linalg.norm(mean, axis=1, keepdims=True)
+    entry_class = group_class[groups]
+    cosine = np.einsum("ij,ij->i", normals[groups], mean[column]).clip(-1.0, 1.0)
+    reach = np.arccos(cosine) + math.sqrt(3.0) / 2.0 * class_quantum_rad[entry_class]
+    starts = ptr[:-1]
+    far = np.maximum.reduceat(reach, starts) + _FAR_LOBES * np.minimum.reduceat(class_lobe_rad[entry_class], starts)
+    lobed = np.minimum.reduceat(class_lobed[entry_class].astype(np.int8), starts) > 0
+    far = np.where(lobed, far, -1.0)
+    return mean.astype(np.float32), np.column_stack([far, np.cos(far), np.sin(far)]).astype(np.float32)
 
 
 def _row_ids(n, columns):
