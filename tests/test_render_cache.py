@@ -431,7 +431,7 @@ def test_lambertian_elements_always_get_rays():
     tube = Part.cylinder("tube", 1.0, 4.0, "paint", segments=16)
     wing = Part.box("wing", (0.04, 2.5, 3.0), "gloss", center_m=(1.8, 0.0, 0.0))
     scene = Scene.from_parts([tube, wing], {"paint": Lambertian(0.5), "gloss": GGX(0.6, 0.3)})
-    pose = SceneCache.build(scene, grid_size=8).poses[0]
+    pose = SceneCache.build(scene, grid_size=16, element_size_m=0.3).poses[0]
     material = pose.target_material[pose.group_class[pose.raw_area.indices]]
     column = np.repeat(np.arange(pose.raw_count), np.diff(pose.raw_area.indptr))
     diffuse = np.zeros(pose.raw_count, dtype=bool)
