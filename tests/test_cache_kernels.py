@@ -148,7 +148,7 @@ def test_lit_classes_sum_gated_group_areas_into_sorted_classes(n_extra, n_groups
         coarse_cos = np.array([[0.5, -0.2]])
     else:
         class_target, n_targets, coarse_cos = np.zeros((0, n_classes), np.int32), n_classes, np.zeros((1, 0))
-    out = _cache_kernels.lit_classes(
+    arguments = (
         _cache_kernels.pack_words(bits),
         sun_nodes,
         obs_nodes,
@@ -174,6 +174,13 @@ def test_lit_classes_sum_gated_group_areas_into_sorted_classes(n_extra, n_groups
         class_target,
         n_targets,
     )
+    out = _cache_kernels.lit_classes(*arguments)
+    # Into buffers that must grow, then into the same buffers again: the same rows.
+    rows = _cache_kernels.RowBuffers(4)
+    for _ in range(2):
+        for got, expected in zip(_cache_kernels.lit_classes(*arguments, rows=rows), out):
+            np.testing.assert_array_equal(got, expected)
+    assert len(rows.arrays[0]) >= len(out[0]) > 4
     both = bits[sun_nodes].all(axis=1) & bits[obs_nodes].all(axis=1)  # (m, e)
     weight = (area @ both.T.astype(np.float64)).T + area_exposed
     pair_value = np.zeros(both.shape)

@@ -226,8 +226,32 @@ def byte_areas(ptr, group, area, n_words):
     return byte_slot, byte_group, byte_area
 
 
+class RowBuffers:
+    """Output arrays :func:`lit_classes` writes its rows into and keeps for the next call (one
+    per thread). Fresh arrays of a light curve's rows (tens of MB on a glossy mesh), grown as
+    they filled, cost a fifth of the call in copies and page faults."""
+
+    def __init__(self, capacity=1024):
+        self.arrays = (
+            np.empty(capacity, dtype=np.int64),
+            np.empty(capacity, dtype=np.int64),
+            np.empty(capacity),
+            np.empty((capacity, 3)),
+            np.empty((capacity, 3)),
+        )
+
+
+def lit_classes(*arguments, rows=None):
+    """:func:`_lit_classes` with its output in ``rows`` (a :class:`RowBuffers`; new ones by
+    default). The arrays returned are views of those buffers, valid until their next use."""
+    rows = RowBuffers() if rows is None else rows
+    count, *arrays = _lit_classes(*arguments, *rows.arrays)
+    rows.arrays = tuple(arrays)
+    return tuple(a[:count] for a in arrays)
+
+
 @njit(cache=True, nogil=True)
-def lit_classes(
+def _lit_classes(
     words,
     sun_nodes,
     obs_nodes,
@@ -254,6 +278,11 @@ def lit_classes(
     coarse_cos,
     class_target,
     n_targets,
+    out_frames,
+    out_classes,
+    out_area,
+    out_normal,
+    out_geo,
 ):
     """Each frame's shading classes with light: their lit, seen and projected area and normals.
 
@@ -277,8 +306,11 @@ def lit_classes(
     from ``n_classes`` up to ``n_targets``), which is shaded once for all of them
     (``raycast.renderer.cache._coarse_classes``).
 
+    Rows are written into ``out_*`` (grown where they fill).
+
     Returns
     -------
+    count : int, the rows written; then the output arrays (new ones where they grew):
     frames, classes : (k,) int64, the (frame, class) pairs with light, in frame order; a
         coarse class's number is its target's.
     area : (k,) float64, the class's gated area.
@@ -288,12 +320,7 @@ def lit_classes(
     m, n_words = sun_nodes.shape[0], words.shape[1]
     n_groups = len(area_exposed)
     weight = np.zeros(n_groups)
-    capacity = max(1024, 4 * n_classes)
-    out_frames = np.empty(capacity, dtype=np.int64)
-    out_classes = np.empty(capacity, dtype=np.int64)
-    out_area = np.empty(capacity)
-    out_normal = np.empty((capacity, 3))
-    out_geo = np.empty((capacity, 3))
+    capacity = len(out_frames)
     count = 0
     zero, one = np.uint64(0), np.uint64(1)
     n_levels = class_target.shape[0]
@@ -496,7 +523,7 @@ def lit_classes(
             )
             count += 1
             a[:] = 0.0
-    return out_frames[:count], out_classes[:count], out_area[:count], out_normal[:count], out_geo[:count]
+    return count, out_frames, out_classes, out_area, out_normal, out_geo
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -50,6 +50,7 @@ import functools
 import itertools
 import math
 import os
+import threading
 import time
 import weakref
 
@@ -442,7 +443,7 @@ class SceneCache:
 
         def shade(sl, pairs, occluded):
             frames = every[sl]
-            lit = _lit_classes(pose, frames, self.grid_size, pairs, occluded, origins.shape[1])
+            lit = _lit_classes(pose, frames, self.grid_size, pairs, occluded, origins.shape[1], _thread_rows())
             total[sl] = self._shaded(pose, *lit, frames.sun, frames.obs)
 
         # A scene without bit-held elements (a convex one) shades in well under a millisecond:
@@ -729,7 +730,19 @@ def _occluded(pose, rays, threads):
     return np.split(flags, np.cumsum(counts)[:-1])
 
 
-def _lit_classes(pose, frames, grid_size, pairs, occluded, k):
+def _thread_rows():
+    """This thread's :class:`raycast.renderer._cache_kernels.RowBuffers` (the run time's
+    threads each shade one batch at a time, and use its rows before the next)."""
+    rows = getattr(_ROWS, "buffers", None)
+    if rows is None:
+        rows = _ROWS.buffers = _cache_kernels.RowBuffers()
+    return rows
+
+
+_ROWS = threading.local()
+
+
+def _lit_classes(pose, frames, grid_size, pairs, occluded, k, rows=None):
     """Each frame's shading classes with light (:func:`raycast.renderer._cache_kernels.lit_classes`).
 
     ``frames`` a batch of :class:`_Frames`; ``pairs`` its :func:`_pairs_to_decide` and its
@@ -737,7 +750,8 @@ def _lit_classes(pose, frames, grid_size, pairs, occluded, k):
     classes' lit, seen and projected areas (k,), and their mean shading and geometric normals
     (k, 3), weighted by those areas in each frame (so a class shared by faces that are gated or
     shadowed differently is shaded where its light comes from). Factorised groups add the
-    product of their interpolated factors.
+    product of their interpolated factors. ``rows``: buffers to write into
+    (:func:`_thread_rows`; the arrays returned are then views of them).
     """
     m = len(frames.sun)
     area = pose.raw_area
@@ -774,6 +788,7 @@ def _lit_classes(pose, frames, grid_size, pairs, occluded, k):
         pose.coarse_cos,
         pose.class_target,
         len(pose.target_material),
+        rows=rows,
     )
 
 
