@@ -33,7 +33,10 @@ from bench.record import HISTORY, command, figure, latest, record, timed, today 
 from bench.render import MODELS  # noqa: E402
 
 CHART = ROOT / "docs" / "img" / "cache_frontier.png"
-SETTINGS = "default;bins=1;elements=r/40,bins=1;elements=r/30,bins=1;elements=r/30,bins=2;elements=r/30,bins=1,step=6"
+SETTINGS = (
+    "default;bins=1;elements=r/40,bins=1;elements=r/50,bins=1;elements=r/30,bins=1;elements=r/30,bins=1,edge=2;"
+    "elements=r/30,bins=2;elements=r/30,bins=1,step=6"
+)
 TARGET_MS, TARGET_MAG = 20.0, 0.01
 OPTIONS = {
     "bins": "normal_bins_per_step",
