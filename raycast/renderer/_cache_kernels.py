@@ -321,6 +321,7 @@ def _lit_classes(
     n_groups = len(area_exposed)
     weight = np.zeros(n_groups)
     capacity = len(out_frames)
+    out = (out_frames, out_classes, out_area, out_normal, out_geo)
     count = 0
     zero, one = np.uint64(0), np.uint64(1)
     n_levels = class_target.shape[0]
@@ -409,6 +410,7 @@ def _lit_classes(
             out_area = grown(out_area, capacity, count)
             out_normal = grown(out_normal, capacity, count)
             out_geo = grown(out_geo, capacity, count)
+            out = (out_frames, out_classes, out_area, out_normal, out_geo)
         sx, sy, sz = sun[f, 0], sun[f, 1], sun[f, 2]
         ox, oy, oz = obs[f, 0], obs[f, 1], obs[f, 2]
         hx, hy, hz = sx + ox, sy + oy, sz + oz
@@ -450,11 +452,7 @@ def _lit_classes(
                             level += 1
                     if level == 0:
                         _put_row(
-                            out_frames,
-                            out_classes,
-                            out_area,
-                            out_normal,
-                            out_geo,
+                            out,
                             count,
                             f,
                             current,
@@ -506,11 +504,7 @@ def _lit_classes(
             # of a call on the all-Glossy paper mesh.
             t = coarse_used[i]
             _put_row(
-                out_frames,
-                out_classes,
-                out_area,
-                out_normal,
-                out_geo,
+                out,
                 count,
                 f,
                 n_classes + t,
@@ -529,9 +523,10 @@ def _lit_classes(
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _put_row(frames, classes, area, normal, geo, row, f, c, total, nx, ny, nz, gx, gy, gz):
-    """Row ``row`` of :func:`lit_classes`' output: frame f's class c, its gated area and its
-    area-weighted normal sums, normalised."""
+def _put_row(out, row, f, c, total, nx, ny, nz, gx, gy, gz):
+    """Row ``row`` of :func:`lit_classes`' output ``out`` (frames, classes, area, normal, geo):
+    frame f's class c, its gated area and its area-weighted normal sums, normalised."""
+    frames, classes, area, normal, geo = out
     norm = math.sqrt(nx * nx + ny * ny + nz * nz)
     geo_norm = math.sqrt(gx * gx + gy * gy + gz * gz)
     frames[row], classes[row], area[row] = f, c, total
