@@ -930,18 +930,21 @@ def _build_pose(
     # Shading classes: material and binned shading normal, shared by every face. The BRDF is
     # evaluated once per class and frame; a smooth-shaded tube's normals then fall into a ring
     # of classes instead of (faces x bins).
-    key = np.column_stack([np.round(el["normal"][:, k] / quantum[:, 0]) for k in range(3)]).astype(np.int64)
-    shade_class, _ = _row_ids(len(quantum), itertools.chain([el["material"]], key.T))
+    shade_class, _ = _row_ids(
+        len(quantum),
+        itertools.chain([el["material"]], (np.round(el["normal"][:, k] / quantum[:, 0]) for k in range(3))),
+    )
     n_classes = int(shade_class.max()) + 1 if len(shade_class) else 0
     class_material = np.zeros(n_classes, dtype=np.int64)
     class_material[shade_class] = el["material"]
-    class_key = np.zeros((n_classes, 3), dtype=np.int64)
-    class_key[shade_class] = key
+    # Each class's area-weighted mean normal lies in its cell (a cube of normal space), so it
+    # rounds to the cell's key; normalised, it is the class's nominal normal.
     class_normal = np.column_stack(
         [np.bincount(shade_class, weights=el["normal"][:, k] * weight_area, minlength=n_classes) for k in range(3)]
     )
+    class_normal /= np.bincount(shade_class, weights=weight_area, minlength=n_classes)[:, None]
+    class_key = np.round(class_normal / normal_quantum_rad[class_material][:, None]).astype(np.int64)
     class_normal /= np.linalg.norm(class_normal, axis=1, keepdims=True)
-    del key
     lobes = np.array([b.lobe_width_rad or 0.0 for b in scene.brdfs])
     class_target, target_material, coarse_cos = _coarse_classes(
         class_key, class_material, normal_quantum_rad, lobes, coarse_cap_rad
