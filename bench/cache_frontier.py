@@ -15,7 +15,9 @@ issue's target (<= 20 ms, <= 0.01 mag) as a box.
 A setting is ``default`` or options joined by commas: ``bins=`` (normal_bins_per_step),
 ``elements=`` (element_size_m, as a fraction of the mesh radius written ``r/40`` or metres),
 ``step=`` (normal_step_deg), ``grid=`` (grid_size, the visibility's cube map: a finer grid leaves fewer
-element-direction pairs for exact rays), ``edge=`` (edge_rays_per_side).
+element-direction pairs for exact rays), ``edge=`` (edge_rays_per_side), ``tail=`` (coarse_bin_ratio, a
+fraction such as ``1/3``) and ``far=`` (far_lobe_widths): how much of a glossy lobe's tail is shaded in
+coarser bins and left to the visibility bits' interpolation.
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ from bench.render import MODELS  # noqa: E402
 CHART = ROOT / "docs" / "img" / "cache_frontier.png"
 SETTINGS = (
     "default;bins=1;elements=r/40,bins=1;elements=r/50,bins=1;elements=r/30,bins=1;elements=r/30,bins=1,edge=2;"
+    "elements=r/30,bins=1,edge=2,tail=1/4,far=2;elements=r/30,bins=1,edge=2,tail=1/3,far=2;"
     "elements=r/30,bins=2;elements=r/30,bins=1,step=6"
 )
 TARGET_MS, TARGET_MAG = 20.0, 0.01
@@ -44,6 +47,8 @@ OPTIONS = {
     "step": "normal_step_deg",
     "grid": "grid_size",
     "edge": "edge_rays_per_side",
+    "tail": "coarse_bin_ratio",
+    "far": "far_lobe_widths",
 }
 # Options that count something: whole numbers.
 COUNTS = ("grid", "edge")
@@ -61,6 +66,9 @@ def parse_setting(text: str, radius_m: float) -> dict:
             raise SystemExit(f"--settings: {part!r} is not one of {', '.join(k + '=' for k in OPTIONS)} with a value")
         if key == "elements" and value.startswith("r/"):
             options[OPTIONS[key]] = radius_m / float(value[2:])
+        elif key == "tail" and "/" in value:
+            numerator, _, denominator = value.partition("/")
+            options[OPTIONS[key]] = float(numerator) / float(denominator)
         elif key in COUNTS:
             if not value.isdigit() or int(value) < 1:
                 raise SystemExit(f"--settings: {part!r}: {key} takes a whole number of at least 1")

@@ -16,7 +16,8 @@ def test_settings_read_as_build_options():
         "edge_rays_per_side": 2,
         "normal_bins_per_step": 1.0,
     }
-    with pytest.raises(SystemExit, match="'size=48' is not one of bins=, elements=, step=, grid=, edge="):
+    assert parse_setting("tail=1/4,far=2", 8.0) == {"coarse_bin_ratio": 0.25, "far_lobe_widths": 2.0}
+    with pytest.raises(SystemExit, match="'size=48' is not one of bins=, elements=, step=, grid=, edge=, tail="):
         parse_setting("size=48", 8.0)
     with pytest.raises(SystemExit, match="'grid=4.5': grid takes a whole number"):
         parse_setting("grid=4.5", 8.0)
