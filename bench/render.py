@@ -572,6 +572,9 @@ def cache_label(options, title=False):
         "normal_step_deg": ("normal step {:g} deg", "shading normals in steps of {:g} deg"),
         "normal_bins_per_step": ("{:g} normal bins per step", "shading classes {:g} per normal step"),
         "element_size_m": ("elements {:g} m", "surface elements of {:g} m everywhere"),
+        "edge_rays_per_side": ("{0:d} x {0:d} edge rays", "exact rays from {0:d} x {0:d} points an element"),
+        "coarse_bin_ratio": ("coarse bins at {:.3g}", "coarse bins at {:.3g} of their distance from the lobe"),
+        "far_lobe_widths": ("far pairs beyond {:g} lobes", "no exact rays beyond {:g} lobe widths"),
     }
     return [words[key][title].format(value) for key, value in (options or {}).items() if value is not None]
 
@@ -732,6 +735,9 @@ def run_scenes(args, argv):
         "normal_step_deg": args.cache_normal_step_deg,
         "normal_bins_per_step": args.cache_normal_bins,
         "element_size_m": args.cache_element_size_m,
+        "edge_rays_per_side": args.cache_edge_rays,
+        "coarse_bin_ratio": args.cache_tail,
+        "far_lobe_widths": args.cache_far,
     }
     # --partial keeps the rows of finished scenes in a JSON file, so a stopped run resumes.
     partial = Path(args.partial) if args.partial else None
@@ -787,6 +793,8 @@ def run_scenes(args, argv):
     # So is a run with the fast path's shading normals set coarser or finer than its own rule.
     name += f"_normal_step_{args.cache_normal_step_deg:g}deg" if args.cache_normal_step_deg else ""
     name += f"_normal_bins_{args.cache_normal_bins:g}" if args.cache_normal_bins else ""
+    for suffix, value in (("edge_rays", args.cache_edge_rays), ("tail", args.cache_tail), ("far", args.cache_far)):
+        name += f"_{suffix}_{value:.3g}" if value is not None else ""
     name += "".join(f"_{scene}" for scene in subset)
     record(name, command("render.py", argv), scenes_figures(rows), section, data=rows)
     return 0
@@ -848,6 +856,24 @@ def main(argv=None):
         default=None,
         help="with --scenes: the fast path's largest surface element, every triangle (SceneCache.build's "
         "element_size_m; default the mesh radius / 30, half that on smooth glossy triangles)",
+    )
+    parser.add_argument(
+        "--cache-edge-rays",
+        type=int,
+        default=None,
+        help="with --scenes: the fast path's exact rays from k x k points an element (edge_rays_per_side; default 1)",
+    )
+    parser.add_argument(
+        "--cache-tail",
+        type=float,
+        default=None,
+        help="with --scenes: the fast path's coarse_bin_ratio (default its own, 1/6)",
+    )
+    parser.add_argument(
+        "--cache-far",
+        type=float,
+        default=None,
+        help="with --scenes: the fast path's far_lobe_widths (default its own, 4)",
     )
     parser.add_argument(
         "--cycles-reference",

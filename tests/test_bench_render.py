@@ -44,6 +44,10 @@ def test_the_normal_options_reach_the_build_and_name_the_rows():
     assert cache_label(options, title=True) == ["shading classes 1 per normal step"]
     assert traced_build(plate, 4, element_size_m=0.2)[0].element_size_m == 0.2
     assert cache_label({"element_size_m": 0.2}) == ["elements 0.2 m"]
+    tail = {"edge_rays_per_side": 2, "coarse_bin_ratio": 1 / 3, "far_lobe_widths": 2.0}
+    cache = traced_build(plate, 4, **tail)[0]
+    assert (cache.edge_rays_per_side, cache.coarse_bin_ratio, cache.far_lobe_widths) == (2, 1 / 3, 2.0)
+    assert cache_label(tail) == ["2 x 2 edge rays", "coarse bins at 0.333", "far pairs beyond 2 lobes"]
 
 
 def test_the_verdict_judges_the_cycles_ratio_by_the_target_and_names_the_aim():
