@@ -607,7 +607,10 @@ def scenes_chart(rows, path, reference_cycles=REFERENCE_CYCLES):
     import matplotlib.pyplot as plt
 
     names = list(dict.fromkeys(r["scene"] for r in rows))
-    fig, axes = plt.subplots(2, (len(names) + 1) // 2, figsize=(5 * ((len(names) + 1) // 2), 9), squeeze=False)
+    # One row for one or two scenes (a run of a subset), two for more.
+    n_rows = 1 if len(names) <= 2 else 2
+    n_columns = -(-len(names) // n_rows)
+    fig, axes = plt.subplots(n_rows, n_columns, figsize=(max(5 * n_columns, 7), 4.5 * n_rows + 0.5), squeeze=False)
     styles = {"direct": ("o", "C0"), "cached": ("s", "C2"), "cycles": ("^", "C3")}
     for ax, name in zip(axes.ravel(), names):
         for method, (marker, color) in styles.items():
@@ -634,7 +637,7 @@ def scenes_chart(rows, path, reference_cycles=REFERENCE_CYCLES):
         ax.set_visible(False)
     handles, labels = axes[0, 0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=8, frameon=False)
-    fig.tight_layout(rect=(0.0, 0.06, 1.0, 1.0))
+    fig.tight_layout(rect=(0.0, 0.12 / n_rows, 1.0, 1.0))
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     print(f"chart written to {path}")
@@ -767,11 +770,16 @@ def run_scenes(args, argv):
     # own already, named by those.)
     plain = default_reference and not cache_label(cache_options)
     subset = tuple(comparisons) if plain and set(comparisons) != set(SCENE_NAMES) else ()
+    # A run with the fast path's settings changed is named by them (its history name and chart).
+    settings = f"_normal_step_{args.cache_normal_step_deg:g}deg" if args.cache_normal_step_deg else ""
+    settings += f"_normal_bins_{args.cache_normal_bins:g}" if args.cache_normal_bins else ""
+    for suffix, value in (("edge_rays", args.cache_edge_rays), ("tail", args.cache_tail), ("far", args.cache_far)):
+        settings += f"_{suffix}_{value:.3g}" if value is not None else ""
     if not args.no_cycles:
         chart = (
             SCENES_CHART.with_name(f"{SCENES_CHART.stem}_{'_'.join(subset)}{SCENES_CHART.suffix}")
             if subset
-            else SCENES_CHART
+            else SCENES_CHART.with_name(f"{SCENES_CHART.stem}{settings}{SCENES_CHART.suffix}")
             if default_reference
             else SCENES_CHART.with_name(f"{SCENES_CHART.stem}_ref{args.cycles_reference[1]}{SCENES_CHART.suffix}")
         )
@@ -790,11 +798,8 @@ def run_scenes(args, argv):
     name = "render_scenes" if not args.no_cycles else "render_scenes_fast_path"
     # A run against another reference is its own benchmark: it does not replace the default's table.
     name += "" if default_reference or args.no_cycles else f"_reference_{args.cycles_reference[1]}spp"
-    # So is a run with the fast path's shading normals set coarser or finer than its own rule.
-    name += f"_normal_step_{args.cache_normal_step_deg:g}deg" if args.cache_normal_step_deg else ""
-    name += f"_normal_bins_{args.cache_normal_bins:g}" if args.cache_normal_bins else ""
-    for suffix, value in (("edge_rays", args.cache_edge_rays), ("tail", args.cache_tail), ("far", args.cache_far)):
-        name += f"_{suffix}_{value:.3g}" if value is not None else ""
+    # So is a run with the fast path's settings changed from its own rules.
+    name += settings
     name += "".join(f"_{scene}" for scene in subset)
     record(name, command("render.py", argv), scenes_figures(rows), section, data=rows)
     return 0
