@@ -41,7 +41,7 @@ from bench.render import MODELS, REFERENCE_CYCLES  # noqa: E402
 
 CHART = ROOT / "docs" / "img" / "cache_frontier.png"
 SETTINGS = (
-    "default;bins=1;elements=r/40,bins=1;elements=r/50,bins=1;elements=r/30,bins=1;elements=r/30,bins=1,edge=2;"
+    "default;bins=1;bins=1,tail=1/3,far=2;elements=r/40,bins=1;elements=r/50,bins=1;elements=r/30,bins=1;elements=r/30,bins=1,edge=2;"
     "elements=r/30,bins=1,edge=2,tail=1/4,far=2;elements=r/30,bins=1,edge=2,tail=1/3,far=2;"
     "elements=r/30,bins=2;elements=r/30,bins=1,step=6"
 )

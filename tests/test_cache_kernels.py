@@ -313,3 +313,18 @@ def test_cube_cell_is_the_first_node_cube_grid_weights_gives():
         index, _ = cube_grid_weights(directions / np.linalg.norm(directions, axis=1, keepdims=True), n)
         cells = [_cache_kernels._cube_cell(x, y, z, n) for x, y, z in directions]
         np.testing.assert_array_equal(cells, index[:, 0])
+
+
+def test_merged_by_frame_is_the_stable_sort_of_both():
+    # Each frame's pairs of the first triple, then those of the second: what a stable argsort
+    # of the two joined gives, including frames only one of them has and empty triples.
+    rng = np.random.default_rng(5)
+    first = (np.sort(rng.integers(0, 40, 300)), rng.integers(0, 10**6, 300), rng.integers(1, 4, 300).astype(np.uint8))
+    second = (np.sort(rng.integers(10, 60, 200)), rng.integers(0, 10**6, 200), rng.integers(1, 4, 200).astype(np.uint8))
+    empty = tuple(a[:0] for a in first)
+    for a, b in ((first, second), (second, first), (first, empty), (empty, second)):
+        order = np.argsort(np.r_[a[0], b[0]], kind="stable")
+        expected = [np.r_[x, y][order] for x, y in zip(a, b)]
+        for got, want in zip(_cache_kernels.merged_by_frame(a, b), expected):
+            np.testing.assert_array_equal(got, want)
+            assert got.dtype == want.dtype

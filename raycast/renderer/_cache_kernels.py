@@ -123,6 +123,32 @@ def _add_pairs(chosen, w, sun_all, obs_all, f, sx, sy, sz, ox, oy, oz, normals, 
     return count
 
 
+@njit(cache=True, nogil=True)
+def merged_by_frame(first, second):
+    """Two (frames, elements, need) triples, each in frame order, as one in frame order: each
+    frame's pairs of ``first``, then its pairs of ``second`` (a stable sort of the two joined,
+    in one pass)."""
+    frames_a, elements_a, need_a = first
+    frames_b, elements_b, need_b = second
+    n_a, n_b = len(frames_a), len(frames_b)
+    frames = np.empty(n_a + n_b, dtype=frames_a.dtype)
+    elements = np.empty(n_a + n_b, dtype=elements_a.dtype)
+    need = np.empty(n_a + n_b, dtype=need_a.dtype)
+    i = j = k = 0
+    while i < n_a or j < n_b:
+        # A frame's run of each, in turn (runs, not pairs: the branch is taken once a run).
+        f = min(frames_a[i] if i < n_a else frames_b[j], frames_b[j] if j < n_b else frames_a[i])
+        while i < n_a and frames_a[i] == f:
+            frames[k], elements[k], need[k] = f, elements_a[i], need_a[i]
+            i += 1
+            k += 1
+        while j < n_b and frames_b[j] == f:
+            frames[k], elements[k], need[k] = f, elements_b[j], need_b[j]
+            j += 1
+            k += 1
+    return frames, elements, need
+
+
 def gap_pairs(words, gap_ptr, gap_word, gap_mask, sun_nodes, obs_nodes, sun, obs, normals):
     """The (frame, element) pairs that may see through a gap narrower than the grid, to decide by rays.
 

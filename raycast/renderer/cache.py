@@ -715,8 +715,7 @@ def _pairs_to_decide(pose, batch, origins):
                 pose.raw_normals,
             )
             if len(gap[0]):
-                order = np.argsort(np.r_[frames, gap[0]], kind="stable")
-                frames, elements, need = (np.r_[a, b][order] for a, b in zip((frames, elements, need), gap))
+                frames, elements, need = _cache_kernels.merged_by_frame((frames, elements, need), gap)
         blend = np.full(len(frames), -1.0, dtype=np.float32)
         if len(frames) and np.any(pose.element_far[:, 0] >= 0.0):
             nearest = _cache_kernels.nearest_lobes(pose.class_normal, pose.class_lobed, batch.sun, batch.obs)
