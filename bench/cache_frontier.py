@@ -107,13 +107,14 @@ def chart(rows, scene: str, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    figure_, axis = plt.subplots(figsize=(6.4, 4.0), layout="constrained")
+    figure_, axis = plt.subplots(figsize=(8.4, 4.2), layout="constrained")
     axis.add_patch(plt.Rectangle((0, 0), TARGET_MS, TARGET_MAG, color="C2", alpha=0.2, label="target"))
     # Against Cycles where the run had it (--cycles), else against the direct renderer.
     key = "rms_cycles_mag" if all("rms_cycles_mag" in row for row in rows) else "rms_mag"
-    for row in rows:
-        axis.plot(row["wall_ms"], row[key], "o", color="C0")
-        axis.annotate(row["setting"], (row["wall_ms"], row[key]), fontsize=7, xytext=(4, 3), textcoords="offset points")
+    # Settings crowd near the target: numbered at their points, named in the legend.
+    for number, row in enumerate(rows, 1):
+        axis.plot(row["wall_ms"], row[key], "o", color="C0", label=f"{number}: {row['setting']}")
+        axis.annotate(str(number), (row["wall_ms"], row[key]), fontsize=8, xytext=(4, 3), textcoords="offset points")
     axis.set_xscale("log")
     axis.set_yscale("log")
     plain = matplotlib.ticker.FormatStrFormatter("%g")
@@ -124,7 +125,7 @@ def chart(rows, scene: str, path: Path) -> None:
     axis.set_xlabel("wall time per 150-frame light curve (ms)")
     axis.set_ylabel("RMS from Cycles (mag)" if key == "rms_cycles_mag" else "RMS from the direct renderer (mag)")
     axis.set_title(f"fast path on {scene}: speed against accuracy by build setting", fontsize=9)
-    axis.legend(fontsize=7)
+    axis.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), handlelength=0.8, frameon=False)
     figure_.savefig(path, dpi=110)
     plt.close(figure_)
 

@@ -346,7 +346,8 @@ class SceneCache:
         far_lobe_widths : float, a mixed (element, frame) pair of a pure-lobe material whose
             normals are all this many lobe widths further from the half vector than the frame's
             nearest lobed class gets no exact rays: its bits' interpolation counts it (default
-            4; inf: never). 2 casts 41 000 rays instead of 100 000 there, to the same 0.0001 mag.
+            4; inf: never). With 1/3 above, 2 casts 41 000 rays there instead of 69 000 at 3
+            (elements radius / 30, 2 x 2 edge rays), the light curve the same to 0.0001 mag.
         progress : bool, show a progress bar over the visibility rays.
         """
         if not isinstance(scene, Scene):
