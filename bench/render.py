@@ -773,6 +773,7 @@ def run_scenes(args, argv):
     # A run with the fast path's settings changed is named by them (its history name and chart).
     settings = f"_normal_step_{args.cache_normal_step_deg:g}deg" if args.cache_normal_step_deg else ""
     settings += f"_normal_bins_{args.cache_normal_bins:g}" if args.cache_normal_bins else ""
+    settings += f"_elements_{args.cache_element_size_m:g}m" if args.cache_element_size_m else ""
     for suffix, value in (("edge_rays", args.cache_edge_rays), ("tail", args.cache_tail), ("far", args.cache_far)):
         settings += f"_{suffix}_{value:.3g}" if value is not None else ""
     if not args.no_cycles:
