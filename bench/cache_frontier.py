@@ -231,7 +231,7 @@ Targets: <= {TARGET_MS:g} ms and <= {TARGET_MAG:g} mag RMS. Settings meeting bot
 {", ".join(r["setting"] for r in meets) or "none"}. Load average at the end {os.getloadavg()[0]:.1f}.
 
 {columns}
-{"|---" * columns.count(" | ")}|
+{"|---" * (columns.count(" | ") + 1)}|
 """
         + "\n".join(lines)
         + f"\n\n![fast path: speed against accuracy]({CHART.relative_to(ROOT / 'docs')})\n"
