@@ -189,15 +189,15 @@ def main(argv=None) -> int:
             "rms_mag": rms,
             "max_mag": largest,
         }
-        against = ""
+        from_cycles = ""
         if cycles is not None:
             row["rms_cycles_mag"], row["max_cycles_mag"] = errors(values, cycles)
-            against = f", {row['rms_cycles_mag']:.4f} (max {row['max_cycles_mag']:.4f}) from Cycles"
+            from_cycles = f", {row['rms_cycles_mag']:.4f} (max {row['max_cycles_mag']:.4f}) from Cycles"
         rows.append(row)
         print(
             f"{text}: {row['classes']} classes, {row['elements']} elements, build {build_s:.0f} s; "
             f"{wall_ms:.1f} ms wall ({cpu_ms:.1f} ms CPU) a light curve; {row['rms_mag']:.4f} mag RMS "
-            f"(max {row['max_mag']:.4f}) from the direct renderer{against}",
+            f"(max {row['max_mag']:.4f}) from the direct renderer{from_cycles}",
             flush=True,
         )
     judged = "rms_cycles_mag" if cycles is not None else "rms_mag"

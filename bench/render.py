@@ -564,19 +564,37 @@ def compiled_loops() -> int:
     return count
 
 
+# The fast path's build options a --scenes run may change: words for a row's setting, for a
+# section's title, and the suffix of the run's history name and chart.
+CACHE_OPTION_WORDS = {
+    "normal_step_deg": ("normal step {:g} deg", "shading normals in steps of {:g} deg", "_normal_step_{:g}deg"),
+    "normal_bins_per_step": ("{:g} normal bins per step", "shading classes {:g} per normal step", "_normal_bins_{:g}"),
+    "element_size_m": ("elements {:g} m", "surface elements of {:g} m everywhere", "_elements_{:g}m"),
+    "edge_rays_per_side": (
+        "{0:d} x {0:d} edge rays",
+        "exact rays from {0:d} x {0:d} points an element",
+        "_edge_rays_{:.3g}",
+    ),
+    "coarse_bin_ratio": (
+        "coarse bins at {:.3g}",
+        "coarse bins at {:.3g} of their distance from the lobe",
+        "_tail_{:.3g}",
+    ),
+    "far_lobe_widths": ("far pairs beyond {:g} lobes", "no exact rays beyond {:g} lobe widths", "_far_{:.3g}"),
+}
+
+
 def cache_label(options, title=False):
     """Words for the fast path's build options that differ from its own rules, for a row's
     setting (``{"normal_step_deg": 6}`` -> ["normal step 6 deg"]) or a section's ``title``
     (["shading normals in steps of 6 deg"])."""
-    words = {
-        "normal_step_deg": ("normal step {:g} deg", "shading normals in steps of {:g} deg"),
-        "normal_bins_per_step": ("{:g} normal bins per step", "shading classes {:g} per normal step"),
-        "element_size_m": ("elements {:g} m", "surface elements of {:g} m everywhere"),
-        "edge_rays_per_side": ("{0:d} x {0:d} edge rays", "exact rays from {0:d} x {0:d} points an element"),
-        "coarse_bin_ratio": ("coarse bins at {:.3g}", "coarse bins at {:.3g} of their distance from the lobe"),
-        "far_lobe_widths": ("far pairs beyond {:g} lobes", "no exact rays beyond {:g} lobe widths"),
-    }
-    return [words[key][title].format(value) for key, value in (options or {}).items() if value is not None]
+    return [CACHE_OPTION_WORDS[key][title].format(value) for key, value in (options or {}).items() if value is not None]
+
+
+def cache_suffix(options):
+    """The suffix naming a run with these build options changed (``{"normal_bins_per_step": 1}``
+    -> "_normal_bins_1"; "" for none)."""
+    return "".join(CACHE_OPTION_WORDS[key][2].format(value) for key, value in options.items() if value is not None)
 
 
 def traced_build(scene, grid, **options):
@@ -771,11 +789,7 @@ def run_scenes(args, argv):
     plain = default_reference and not cache_label(cache_options)
     subset = tuple(comparisons) if plain and set(comparisons) != set(SCENE_NAMES) else ()
     # A run with the fast path's settings changed is named by them (its history name and chart).
-    settings = f"_normal_step_{args.cache_normal_step_deg:g}deg" if args.cache_normal_step_deg else ""
-    settings += f"_normal_bins_{args.cache_normal_bins:g}" if args.cache_normal_bins else ""
-    settings += f"_elements_{args.cache_element_size_m:g}m" if args.cache_element_size_m else ""
-    for suffix, value in (("edge_rays", args.cache_edge_rays), ("tail", args.cache_tail), ("far", args.cache_far)):
-        settings += f"_{suffix}_{value:.3g}" if value is not None else ""
+    settings = cache_suffix(cache_options)
     if not args.no_cycles:
         chart = (
             SCENES_CHART.with_name(f"{SCENES_CHART.stem}_{'_'.join(subset)}{SCENES_CHART.suffix}")

@@ -31,7 +31,7 @@ def test_traced_build_measures_a_build_that_compiled_nothing():
 
 
 def test_the_normal_options_reach_the_build_and_name_the_rows():
-    from bench.render import cache_label, traced_build
+    from bench.render import cache_label, cache_suffix, traced_build
     from raycast.cycles.comparison import comparison_scenes
 
     plate = comparison_scenes(ROOT.parent / "shared" / "data" / "models", ("plate",))["plate"].scene
@@ -48,6 +48,10 @@ def test_the_normal_options_reach_the_build_and_name_the_rows():
     cache = traced_build(plate, 4, **tail)[0]
     assert (cache.edge_rays_per_side, cache.coarse_bin_ratio, cache.far_lobe_widths) == (2, 1 / 3, 2.0)
     assert cache_label(tail) == ["2 x 2 edge rays", "coarse bins at 0.333", "far pairs beyond 2 lobes"]
+    assert cache_suffix({"normal_bins_per_step": 1.0, "element_size_m": None, **tail}) == (
+        "_normal_bins_1_edge_rays_2_tail_0.333_far_2"
+    )
+    assert cache_suffix({"normal_step_deg": None}) == ""
 
 
 def test_the_verdict_judges_the_cycles_ratio_by_the_target_and_names_the_aim():

@@ -1132,8 +1132,9 @@ def _coarse_classes(class_key, class_material, quantum_rad, lobe_rad, cap_rad, r
         levels = np.where(lobe_rad > 0.0, np.floor(np.log2(cap_rad / quantum_rad) + 1e-9), 0).clip(0, 6).astype(int)
     n_levels = int(levels.max()) if len(levels) else 0
     coarse_cos = np.full((len(quantum_rad), n_levels), -2.0)
-    for material, (count, q) in enumerate(zip(levels, quantum_rad)):
-        for level in range(1, count + 1 if ratio > 0.0 else 1):
+    # A ratio of 0 leaves every cosine at -2: no level is ever taken.
+    for material, (count, q) in enumerate(zip(levels, quantum_rad) if ratio > 0.0 else ()):
+        for level in range(1, count + 1):
             angle = 2**level * q / ratio
             if angle < math.pi:
                 coarse_cos[material, level - 1] = math.cos(angle)
