@@ -9,6 +9,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
@@ -81,3 +82,14 @@ def pytest_make_collect_report(collector):
     if report.failed and not SHARED_DATA.is_dir() and str(SHARED_DATA) in str(report.longrepr):
         report.outcome = "skipped"
         report.longrepr = (str(collector.path), 0, f"Skipped: {MISSING_SHARED}")
+
+
+def sun_and_observer_at_pass_phases(rng, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(n, 3) unit sun and observer directions at random orientations, phase angles 20-100 deg
+    as on a pass."""
+    sun = rng.normal(size=(n, 3))
+    sun /= np.linalg.norm(sun, axis=1, keepdims=True)
+    tilt = np.deg2rad(rng.uniform(20.0, 100.0, n))
+    side = np.cross(sun, rng.normal(size=(n, 3)))
+    side /= np.linalg.norm(side, axis=1, keepdims=True)
+    return sun, np.cos(tilt)[:, None] * sun + np.sin(tilt)[:, None] * side

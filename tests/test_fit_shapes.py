@@ -14,21 +14,23 @@ import numpy as np
 import pytest
 
 from ingest import read_file
+from raycast.models.box_panels import BUS_SIZE_M
 from rsodb.fit import shape_store
 from rsodb.fit.config import FitConfig
 from rsodb.fit.coverage import window
 from rsodb.fit.runner import FitProblem
 from rsodb.fit.shape_store import ShapeStore
 from rsodb.fit.shapes import mesh_shape
-from tests.conftest import MODELS, PROJECT_ROOT, TOPEX_PHV
+from tests.conftest import MODELS, PROJECT_ROOT, TOPEX_PHV, sun_and_observer_at_pass_phases
 
 BOX_FACES = [(1, 2, 3, 4), (5, 8, 7, 6), (1, 5, 6, 2), (2, 6, 7, 3), (3, 7, 8, 4), (4, 8, 5, 1)]
 
 
-def write_box(directory, name="box", z_half=1.0, albedo=0.2):
-    """A 1 x 1 x 2 m box (as `ConvexFacets.box`) as OBJ + materials JSON, outward faces."""
-    corners = [(-0.5, -0.5, -z_half), (0.5, -0.5, -z_half), (0.5, 0.5, -z_half), (-0.5, 0.5, -z_half)]
-    corners += [(x, y, z_half) for x, y, _ in corners]
+def write_box(directory, name="box", size_m=BUS_SIZE_M, albedo=0.2):
+    """A box (by default the analytic box shape's) as OBJ + materials JSON, outward faces."""
+    x, y, z = (s / 2.0 for s in size_m)
+    corners = [(-x, -y, -z), (x, -y, -z), (x, y, -z), (-x, y, -z)]
+    corners += [(cx, cy, z) for cx, cy, _ in corners]
     lines = ["o body", "usemtl paint"] + [f"v {x} {y} {z}" for x, y, z in corners]
     # Faces wound counter-clockwise seen from outside (bottom face seen from below, etc.).
     lines += ["f 1 4 3 2", "f 5 6 7 8", "f 1 2 6 5", "f 2 3 7 6", "f 3 4 8 7", "f 4 1 5 8"]
@@ -151,7 +153,7 @@ def test_the_stored_cache_is_reused_and_keyed_by_content(tmp_path, template, mon
     renamed = {"model": {"mesh": str(other_obj), "materials": str(other_materials), "n_sub": 1}, "parameters": PRIOR}
     FitProblem.build(template, FitConfig.from_dict(renamed), store=ShapeStore(tmp_path / "shapes"))
     # Other content (a longer box): another key.
-    longer_obj, longer_materials = write_box(copy, name="longer", z_half=1.5)
+    longer_obj, longer_materials = write_box(copy, name="longer", size_m=(2.0, 1.0, 1.0))
     scene = mesh_shape(obj, materials).build()
     longer = mesh_shape(longer_obj, longer_materials).build()
     assert store.key(scene, {}) != store.key(longer, {}) and store.key(scene, {}) == store.key(scene, {})
@@ -243,14 +245,7 @@ def test_the_surface_cache_renders_other_surfaces_as_the_direct_renderer():
 
     free = {"bus_metallic": (0.0, 1.0), "bus_roughness": (0.1, 0.8), "cells_roughness": (0.05, 0.5)}
     cached, names = brightness_for(SHAPES["topex"], free, {"panel_pitch_deg": 12.0}, accuracy_mag=0.01)
-    rng = np.random.default_rng(3)
-    sun = rng.normal(size=(10, 3))
-    sun /= np.linalg.norm(sun, axis=1, keepdims=True)
-    # Phase angles of 20-100 deg, as on a pass.
-    tilt = np.deg2rad(rng.uniform(20.0, 100.0, 10))
-    side = np.cross(sun, rng.normal(size=(10, 3)))
-    side /= np.linalg.norm(side, axis=1, keepdims=True)
-    obs = np.cos(tilt)[:, None] * sun + np.sin(tilt)[:, None] * side
+    sun, obs = sun_and_observer_at_pass_phases(np.random.default_rng(3), 10)
     for values in ({"bus_metallic": 0.9, "bus_roughness": 0.2, "cells_roughness": 0.08}, {}):
         direct = DirectRenderer(topex.build(**values), 0.05).intensity(sun, obs)
         surfaces = dict(topex.SURFACE_PARAMETERS.items())

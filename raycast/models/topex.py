@@ -8,11 +8,11 @@ at ``panel_pitch_deg = 0`` its cells face +x, and the pitch turns it about +y (r
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 import math
 
 import numpy as np
 
+from raycast.models.surfaces import SOLAR_ARRAY_PARAMETERS, SurfaceParameter, checked_surfaces, solar_array_brdfs
 from raycast.renderer.brdf import GGX, Lambertian, Principled
 from raycast.renderer.scene import Articulation, Part, Scene
 
@@ -54,40 +54,17 @@ HGA_DEPTH_M = 0.2
 HGA_BOOM_M = 2.6
 
 
-# Fixed parts of the surface classes (not fitted): the cells' dark diffuse layer, the dielectric
-# specular level of the bus, and the antenna boom's white paint (the dishes' default, and their
-# fixed value before antenna_albedo was a parameter).
-CELLS_DIFFUSE = 0.05
+# Fixed parts of the surface classes (not fitted; the cells' dark diffuse layer is
+# raycast.models.surfaces.CELLS_DIFFUSE): the dielectric specular level of the bus, and the
+# antenna boom's white paint (the dishes' default, and their fixed value before antenna_albedo
+# was a parameter).
 BUS_SPECULAR = 0.5
 ANTENNA_ALBEDO = 0.7
 
 
-@dataclass(frozen=True)
-class SurfaceParameter:
-    """A free reflectance parameter of one surface class, with its prior range and source."""
-
-    default: float
-    low: float
-    high: float
-    meaning: str
-    source: str
-
-
 SURFACE_PARAMETERS = {
-    "cells_specular": SurfaceParameter(
-        0.5,
-        0.5,
-        1.0,
-        "solar cells: Specular IOR Level of the cover glass (F0 = 0.08 x level at IOR 1.5)",
-        "first-surface specular reflectance of cells 0.04-0.125 (Space Solar Power Review 1(3), 1980)",
-    ),
-    "cells_roughness": SurfaceParameter(
-        0.15,
-        0.05,
-        0.5,
-        "solar cells: roughness of the specular lobe (alpha = roughness^2)",
-        "a narrow main specular peak (Small, Butler & Marciniak 2021, Opt. Express 29, 35501)",
-    ),
+    "cells_specular": SOLAR_ARRAY_PARAMETERS["cells_specular"],
+    "cells_roughness": SOLAR_ARRAY_PARAMETERS["cells_roughness"],
     "bus_albedo": SurfaceParameter(
         0.4,
         0.02,
@@ -113,13 +90,7 @@ SURFACE_PARAMETERS = {
         "bus: roughness of its glossy lobes (alpha = roughness^2); wrinkled MLI spreads the glint",
         "crinkled MLI reflects in a lobe tens of degrees wide (Rodriguez et al., AMOS 2007)",
     ),
-    "back_albedo": SurfaceParameter(
-        0.5,
-        0.05,
-        0.8,
-        "solar-array back: diffuse albedo",
-        "Kapton array substrate, diffuse 0.67 new (Space Solar Power Review 1(3), 1980), darker with age",
-    ),
+    "back_albedo": SOLAR_ARRAY_PARAMETERS["back_albedo"],
     "antenna_albedo": SurfaceParameter(
         ANTENNA_ALBEDO,
         0.05,
@@ -182,34 +153,20 @@ def surface_brdfs(**values) -> dict:
     dict of str to BRDF
         Keyed by the model's material names.
     """
-    p = _checked(values, SURFACE_PARAMETERS)
+    p = checked_surfaces(values, SURFACE_PARAMETERS, "TOPEX")
+    array = solar_array_brdfs(p)
     return {
-        "solar_cells": Principled(
-            base_color=CELLS_DIFFUSE, roughness=p["cells_roughness"], specular_ior_level=p["cells_specular"]
-        ),
+        "solar_cells": array["solar_cells"],
         "bus": Principled(
             base_color=p["bus_albedo"],
             metallic=p["bus_metallic"],
             roughness=p["bus_roughness"],
             specular_ior_level=BUS_SPECULAR,
         ),
-        "array_back": Lambertian(albedo=p["back_albedo"]),
+        "array_back": array["array_back"],
         "antenna": Lambertian(albedo=p["antenna_albedo"]),
         "boom": Lambertian(albedo=ANTENNA_ALBEDO),
     }
-
-
-def _checked(values, table) -> dict:
-    """Every parameter of `table` (defaults for those not given), each checked against its range."""
-    unknown = sorted(set(values) - set(table))
-    if unknown:
-        raise ValueError(f"unknown TOPEX surface parameter(s) {unknown}; known: {', '.join(table)}")
-    p = {name: float(values.get(name, spec.default)) for name, spec in table.items()}
-    for name, value in p.items():
-        spec = table[name]
-        if not (math.isfinite(value) and spec.low <= value <= spec.high):
-            raise ValueError(f"TOPEX surface parameter {name}={value!r} is outside its range [{spec.low}, {spec.high}]")
-    return p
 
 
 def louvered_surface_brdfs(**values) -> dict:
@@ -220,7 +177,7 @@ def louvered_surface_brdfs(**values) -> dict:
     **values : float
         Any of `LOUVERED_SURFACE_PARAMETERS` (the rest take their defaults).
     """
-    p = _checked(values, LOUVERED_SURFACE_PARAMETERS)
+    p = checked_surfaces(values, LOUVERED_SURFACE_PARAMETERS, "TOPEX")
     brdfs = surface_brdfs(**{name: p[name] for name in SURFACE_PARAMETERS})
     brdfs["nadir"] = Principled(
         base_color=p["nadir_albedo"],

@@ -49,7 +49,7 @@ __all__ = [
 ]
 
 # Detail of a shape and an attitude family, for ordering rungs of equal parameter count.
-SHAPE_RANK = MappingProxyType({"ellipsoid": 0, "lopsided": 0, "box": 1})
+SHAPE_RANK = MappingProxyType({"ellipsoid": 0, "lopsided": 0, "box": 1, "box_panels": 2})
 MESH_RANK = 3
 ATTITUDE_RANK = MappingProxyType({"inertial": 0, "inertial_tilted": 1, "precessing": 2, "torque_free": 3})
 # Shapes that look the same after half a turn about their spin axis: their light curve repeats

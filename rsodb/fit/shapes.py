@@ -43,7 +43,7 @@ from typing import Any
 
 import numpy as np
 
-from raycast.models import cosmos2502, topex
+from raycast.models import box_panels, cosmos2502, topex
 from raycast.renderer.brdf import GGX, Lambertian, Principled
 from raycast.renderer.cache import SceneCache
 from raycast.renderer.direct import DirectRenderer
@@ -140,7 +140,11 @@ def _cosmos2502():
 
 
 def _box():
-    return ConvexFacets.box((1.0, 1.0, 2.0), albedo=0.2)
+    return ConvexFacets.box(box_panels.BUS_SIZE_M, albedo=0.2)
+
+
+def _box_panels():
+    return box_panels.build()
 
 
 def _ellipsoid():
@@ -185,7 +189,22 @@ SHAPES: Mapping[str, Shape] = MappingProxyType(
             "(raycast.models.cosmos2502): cylinder, two panels, cross; not that mesh, whose file a fit takes "
             "with [model] mesh (configs/cosmos2502_paper.toml)",
         ),
-        "box": Shape(_box, {}, True, "a 1 x 1 x 2 m Lambertian box along body z, albedo 0.2 (analytic)"),
+        "box": Shape(
+            _box,
+            {},
+            True,
+            "a 2 x 1 x 0.7 m Lambertian box, its longest edge along body x, albedo 0.2 (analytic; the "
+            "analytic ellipsoid's bounding box: spinning about z it tumbles end over end and repeats every half turn)",
+        ),
+        "box_panels": Shape(
+            _box_panels,
+            {"panel_pitch_deg": 0.0},
+            False,
+            "the box with two solar-panel wings along body y, cells facing +x at pitch 0 (raycast.models.box_panels): "
+            "the generic satellite for objects without a model; its surface classes are fit parameters",
+            box_panels.SURFACE_PARAMETERS,
+            box_panels.surface_brdfs,
+        ),
         "ellipsoid": Shape(
             _ellipsoid,
             {},
