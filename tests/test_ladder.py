@@ -124,6 +124,47 @@ def test_failed_rungs_are_skipped_and_nothing_scored_chooses_nothing():
     assert choose_rung([failed], {}, 5, settings)[1:] == ("", "")
 
 
+def test_a_rung_dark_where_the_object_was_seen_says_so_and_is_not_chosen():
+    from types import SimpleNamespace
+
+    from rsodb.campaign.ladder import _score as score_rung
+    from rsodb.report.ladder_report import scores_figure
+
+    n = 100
+    time_utc = np.datetime64("2025-01-30T17:00:00", "ms") + np.arange(n) * np.timedelta64(100, "ms")
+    observed = SimpleNamespace(
+        time_utc=time_utc,
+        valid=np.ones(n, bool),
+        saturated=np.zeros(n, bool),
+        best_mag=np.full(n, 5.0),
+        mag_err=np.full(n, 0.01),
+    )
+    residuals = np.full(n, 0.3)
+    residuals[95:] = np.inf  # the model's flat faces all turned from the observer at the end
+    result = SimpleNamespace(
+        time_utc=time_utc,
+        in_window=np.arange(n) < 70,
+        residuals_mag=residuals,
+        spin_periods={},
+        names=("spin_period_s", "jitter_mag"),
+        n_window=70,
+        reduced_chi2=1.0,
+        converged=False,
+        verdict="",
+        elapsed_s=1.0,
+    )
+    rung = Rung("box", "inertial")
+    score, _ = score_rung(rung, "lad.box-inertial", result, observed)
+    assert score.status == "model dark at 5 held-out samples" and not score.ok
+    assert score.train_rms_mag == pytest.approx(0.3)
+    ok = _score("ellipsoid-inertial", 5, 0.8)
+    _, chosen, best = choose_rung([score, ok], {ok.rung: np.full(30, 0.8)}, 5, LadderSettings(rungs=()))
+    assert chosen == best == "ellipsoid-inertial"
+    ladder = LadderResult("p", "lad", (score, ok), chosen, best, 0.02)
+    texts = [t.get_text() for t in scores_figure(ladder).axes[0].texts]
+    assert texts == ["dark"]
+
+
 def test_the_no_model_forecast_repeats_the_last_training_cycle():
     # A curve periodic at 7 s is forecast to its interpolation error at the right lag and
     # badly at a wrong one.

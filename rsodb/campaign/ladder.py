@@ -489,12 +489,16 @@ def _score(rung: Rung, fit_name: str, result: FitResult, observed) -> tuple[Rung
     heldout = _heldout_mask(result.time_utc, result.in_window, observed)
     residuals = result.residuals_mag
     conventions = dict(result.spin_periods).get("conventions", {})
+    # A body with flat faces only can turn every lit face away from the observer: no light where
+    # the object was seen, an infinite residual. Such a rung predicts nothing there; say so.
+    dark = int(np.count_nonzero(~np.isfinite(residuals[heldout])))
+    status = "ok" if not dark else f"model dark at {dark} held-out samples"
     score = RungScore(
         rung.name,
         rung.shape,
         rung.attitude,
         fit_name,
-        "ok" if heldout.any() else "no held-out samples",
+        status if heldout.any() else "no held-out samples",
         len(result.names),
         _rms(residuals[result.in_window]),
         _rms(residuals[heldout]),

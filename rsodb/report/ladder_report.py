@@ -100,6 +100,10 @@ def scores_figure(ladder):
         axis.axhline(
             ladder.naive.heldout_rms_mag, color="k", ls="--", lw=1, label="held out, no model (last cycle repeated)"
         )
+    for position, s in zip(x, ladder.scores):
+        if not math.isfinite(s.heldout_rms_mag) and s.n_heldout:
+            # No bar to draw: the model is dark where the object was seen (its status says where).
+            axis.annotate("dark", (position + 0.2, 0.0), ha="center", va="bottom", fontsize=7, color="C3")
     axis.set_xticks(x, [s.rung for s in ladder.scores], rotation=25, ha="right", fontsize=8)
     axis.set_ylabel("residual RMS (mag)")
     axis.set_title(f"{ladder.pass_id}: chosen {ladder.chosen or 'none'} (red)", fontsize=9)
