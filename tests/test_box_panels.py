@@ -100,12 +100,14 @@ def test_the_cache_of_the_box_with_panels_renders_other_surfaces_as_the_direct_r
     assert names == ("panel_pitch_deg", "cells_roughness", "back_albedo", "bus_albedo")
     sun, obs = sun_and_observer_at_pass_phases(np.random.default_rng(5), 40)
     for values in ({"cells_roughness": 0.08, "bus_albedo": 0.1, "back_albedo": 0.7}, {}):
-        direct = DirectRenderer(box_panels.build(**values), 0.05).intensity(sun, obs)
+        # 2 cm pixels: at 5 cm the reference itself is 0.018 mag RMS off on the narrow glints.
+        direct = DirectRenderer(box_panels.build(**values), 0.02).intensity(sun, obs)
         every = {name: values.get(name, spec.default) for name, spec in box_panels.SURFACE_PARAMETERS.items()}
         fast = cached.intensity(sun, obs, panel_pitch_deg=0.0, **{k: every[k] for k in free})
         lit = direct > 1e-4 * direct.max()
         error_mag = -2.5 * np.log10(fast[lit] / direct[lit])
-        assert np.sqrt(np.mean(error_mag**2)) < 0.02, (values, error_mag)
+        # Measured: 0.0046 mag RMS (max 0.016) with glossy cells, 0.0045 (0.013) at the defaults.
+        assert np.sqrt(np.mean(error_mag**2)) < 0.01, (values, error_mag)
 
 
 def test_surface_parameters_outside_their_range_name_the_model():
