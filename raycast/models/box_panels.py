@@ -35,17 +35,20 @@ WING_SIZE_M = (2.5, 1.0)
 WING_GAP_M = 0.3
 WING_THICKNESS_M = 0.03
 
-# The array's cells and back (cells_specular, cells_roughness, back_albedo), then the bus.
+BUS_ALBEDO = SurfaceParameter(
+    0.4,
+    0.02,
+    0.9,
+    "bus: diffuse (Lambertian) albedo",
+    "from black Kapton (about 0.05) to white paint and bare aluminium (0.8-0.9): H.M. Rodriguez et al., "
+    "AMOS 2007; Willison & Bedard, AMOS",
+)
+# In the order of TOPEX's: the cells, the bus, the array's back.
 SURFACE_PARAMETERS = {
-    **SOLAR_ARRAY_PARAMETERS,
-    "bus_albedo": SurfaceParameter(
-        0.4,
-        0.02,
-        0.9,
-        "bus: diffuse (Lambertian) albedo",
-        "from black Kapton (about 0.05) to white paint and bare aluminium (0.8-0.9): H.M. Rodriguez et al., "
-        "AMOS 2007; Willison & Bedard, AMOS",
-    ),
+    "cells_specular": SOLAR_ARRAY_PARAMETERS["cells_specular"],
+    "cells_roughness": SOLAR_ARRAY_PARAMETERS["cells_roughness"],
+    "bus_albedo": BUS_ALBEDO,
+    "back_albedo": SOLAR_ARRAY_PARAMETERS["back_albedo"],
 }
 
 
