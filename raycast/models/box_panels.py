@@ -25,7 +25,16 @@ from raycast.models.surfaces import SOLAR_ARRAY_PARAMETERS, SurfaceParameter, ch
 from raycast.renderer.brdf import Lambertian
 from raycast.renderer.scene import Articulation, Part, Scene
 
-__all__ = ["build", "surface_brdfs", "SURFACE_PARAMETERS", "BUS_SIZE_M", "WING_SIZE_M", "WING_GAP_M"]
+__all__ = [
+    "build",
+    "surface_brdfs",
+    "SURFACE_PARAMETERS",
+    "BUS_ALBEDO",
+    "BUS_SIZE_M",
+    "WING_SIZE_M",
+    "WING_GAP_M",
+    "WING_THICKNESS_M",
+]
 
 # The analytic box rung's box: the bounding box of the analytic ellipsoid (semi-axes 1 x 0.5 x 0.35 m).
 BUS_SIZE_M = (2.0, 1.0, 0.7)

@@ -55,6 +55,8 @@ ATTITUDE_RANK = MappingProxyType({"inertial": 0, "inertial_tilted": 1, "precessi
 # Shapes that look the same after half a turn about their spin axis: their light curve repeats
 # twice per spin, so their spin period is twice the light curve's.
 HALF_TURN_SYMMETRIC = frozenset({"ellipsoid", "box"})
+# The start of the status of a rung whose model gives no light on some held-out samples.
+DARK_STATUS = "model dark at"
 # Fewest bootstrap blocks in the held-out part (blocks are shortened to keep this many).
 MIN_BLOCKS = 10
 
@@ -492,7 +494,7 @@ def _score(rung: Rung, fit_name: str, result: FitResult, observed) -> tuple[Rung
     # A body with flat faces only can turn every lit face away from the observer: no light where
     # the object was seen, an infinite residual. Such a rung predicts nothing there; say so.
     dark = int(np.count_nonzero(~np.isfinite(residuals[heldout])))
-    status = "ok" if not dark else f"model dark at {dark} held-out samples"
+    status = "ok" if not dark else f"{DARK_STATUS} {dark} held-out samples"
     score = RungScore(
         rung.name,
         rung.shape,

@@ -27,7 +27,8 @@ normals, solar-disk samples) is chosen from the smoothest roughness the prior al
 
 The built-in models built by code approximate real objects (``topex``: TOPEX/Poseidon from its
 published dimensions; ``cosmos2502``: a look-alike of the published workflow's COSMOS 2502 mesh; docs/fitting.md
-says how far each is from its original); to fit the published workflow's own model, give its
+says how far each is from its original) or stand for none (``box_panels``: the generic satellite,
+a box with two solar-panel wings); to fit the published workflow's own model, give its
 mesh file (``[model] mesh``, see configs/cosmos2502_paper.toml).
 """
 

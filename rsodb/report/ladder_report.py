@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 
+from rsodb.campaign.ladder import DARK_STATUS
 from rsodb.fit.plots import lightcurve_figure
 from rsodb.fit.result import FitResult
 from rsodb.report.fit_report import folded_blocks
@@ -101,7 +102,7 @@ def scores_figure(ladder):
             ladder.naive.heldout_rms_mag, color="k", ls="--", lw=1, label="held out, no model (last cycle repeated)"
         )
     for position, s in zip(x, ladder.scores):
-        if not math.isfinite(s.heldout_rms_mag) and s.n_heldout:
+        if s.status.startswith(DARK_STATUS):
             # No bar to draw: the model is dark where the object was seen (its status says where).
             axis.annotate("dark", (position + 0.2, 0.0), ha="center", va="bottom", fontsize=7, color="C3")
     axis.set_xticks(x, [s.rung for s in ladder.scores], rotation=25, ha="right", fontsize=8)
