@@ -96,7 +96,7 @@ def test_defaults_and_overrides():
         ({"modle": {}}, r"fit configuration \[top level\] has unknown keys \['modle'\]"),
         (
             {"model": {"shape": "sphere"}},
-            r"\[model\] shape='sphere' is not auto or one of topex, topex_louvered, cosmos2502, box, ellipsoid, lopsided",
+            r"\[model\] shape='sphere' is not auto or one of topex, topex_louvered, cosmos2502, box, box_panels, ellipsoid, lopsided",
         ),
         (
             {"model": {"attitude": "wobble"}},
