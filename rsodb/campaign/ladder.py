@@ -333,7 +333,7 @@ class LadderResult:
         rows = [
             f"ladder {self.name!r} of {self.pass_id}: trained up to {self.train_end_utc} UTC, held out after",
             f"{'rung':<24} {'npar':>4} {'train':>7} {'held-out':>8} {'+-se':>6} {'n_held':>6} "
-            f"{'P_lc (s)':>9} {'conv':>5} {'median: train':>13} {'held-out':>8}  status",
+            f"{'P_pg (s)':>9} {'conv':>5} {'median: train':>13} {'held-out':>8}  status",
         ]
         for s in self.scores:
             mark = " <- chosen" if s.rung == self.chosen else (" (best)" if s.rung == self.best else "")
@@ -347,7 +347,8 @@ class LadderResult:
             rows.append(self.naive_text())
         rows.append(
             f"RMS in mag of the best-fit sample (median: of the posterior median, when replayed); chosen = simplest rung with held-out RMS within max({self.margin_floor_mag:.3f} mag, "
-            "its bootstrap standard error) of the best"
+            "its bootstrap standard error) of the best; P_pg: the period search on the rung's model curve (the "
+            "periodogram convention, comparable with the stored period; the light-curve one for fits stored before it)"
         )
         return "\n".join(rows)
 

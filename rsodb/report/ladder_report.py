@@ -68,7 +68,7 @@ def scores_table(ladder) -> Table:
             "margin (mag)",
             "held-out samples",
             "reduced chi2",
-            "light-curve period (s)",
+            "period search on the model curve (s)",
             "converged",
             "",
         ),
