@@ -115,3 +115,55 @@ def test_surface_parameters_outside_their_range_name_the_model():
         box_panels.build(bus_albedo=1.5)
     with pytest.raises(ValueError, match=r"unknown box_panels surface parameter\(s\) \['gloss'\]"):
         box_panels.surface_brdfs(gloss=0.2)
+
+
+def test_a_stored_fit_replays_after_its_model_reorders_its_surface_parameters(tmp_path, monkeypatch):
+    # A fit's parameters are stored in the order its model listed them; a later version of the
+    # model that lists the same parameters in another order must still replay the fit, by name.
+    from dataclasses import replace
+
+    from rsodb.archive import Archive
+    from rsodb.cli import main
+    from rsodb.fit import predict_fit, shapes
+    from rsodb.fit.config import FitConfig
+    from rsodb.fit.runner import FitProblem
+    from tests.conftest import COSMOS2553_JD_PHV
+
+    archive = Archive(tmp_path / "archive", create=True)
+    archive.ingest([COSMOS2553_JD_PHV], progress=False)
+    (summary,) = archive.passes(norad=51511)
+    config = tmp_path / "tiny.toml"
+    config.write_text(
+        """name = "tiny"
+band_draws = 5
+[model]
+shape = "box_panels"
+attitude = "inertial"
+n_sub = 1
+[data]
+duration_s = 20.0
+[parameters]
+spin_period_s = { kind = "uniform", low = 4.8, high = 4.9 }
+cells_roughness = {}
+back_albedo = {}
+jitter_mag = { kind = "uniform", low = 0.0, high = 1.0 }
+[sampler]
+n_walkers = 16
+n_steps = 4
+init = "prior"
+"""
+    )
+    archive_dir = str(archive.path)
+    assert main(["fit", summary.pass_id, "--archive", archive_dir, "--config", str(config), "--quiet"]) == 0
+    before = predict_fit(archive, summary.pass_id, "tiny", draws=3)
+    stored = before.result.names
+    assert stored.index("cells_roughness") < stored.index("back_albedo")
+
+    shape = shapes.SHAPES["box_panels"]
+    reordered = dict(reversed(list(shape.surfaces.items())))
+    monkeypatch.setattr(shapes, "SHAPES", {**shapes.SHAPES, "box_panels": replace(shape, surfaces=reordered)})
+    record = {key: value for key, value in before.result.config.items() if key != "shape"}
+    rebuilt = FitProblem.build(archive.get(summary.pass_id), FitConfig.from_dict(record)).posterior.space.names
+    assert rebuilt != stored and set(rebuilt) == set(stored)
+    after = predict_fit(archive, summary.pass_id, "tiny", draws=3)
+    np.testing.assert_allclose(after.samples.mag_model, before.samples.mag_model, atol=1e-9)

@@ -133,13 +133,15 @@ def predict_fit(archive, pass_id: str, name: str | None = None, *, draws: int = 
     problem = FitProblem.build(
         observed, config, load_periods(archive, observed.pass_id), store=shape_store_for(archive)
     )
-    if problem.posterior.space.names != result.names:
+    if set(problem.posterior.space.names) != set(result.names):
         raise ValueError(
             f"fit {name!r} of {observed.pass_id} has parameters {list(result.names)} but its configuration now "
             f"gives {list(problem.posterior.space.names)}; refit the pass"
         )
-    # The stored fit's own space (its priors as they were) reads its stored draws; parameters the
-    # model has gained since (fixed at their defaults) come from the configuration's space.
+    # The stored fit's own space (its priors as they were, its parameters in its order: a model
+    # may list them in another order today, and the model takes them by name) reads its stored
+    # draws; parameters the model has gained since (fixed at their defaults) come from the
+    # configuration's space.
     posterior = problem.posterior
     space = replace(result.space, fixed={**posterior.space.fixed, **result.space.fixed})
     problem = replace(problem, posterior=Posterior(space, posterior.model, posterior.likelihood))
