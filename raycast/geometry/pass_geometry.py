@@ -72,8 +72,10 @@ _FIRST_TIME = np.datetime64("1972-01-01", "ns")
 _LAST_TIME = np.datetime64("2053-10-01", "ns")
 
 
-def choose_n_sub(exposure_s: float, spin_period_s: float | None = None) -> int:
-    """Number of exposure sub-samples so the body turns at most 2 deg per sub-sample.
+def choose_n_sub(
+    exposure_s: float, spin_period_s: float | None = None, max_turn_deg: float = MAX_SUBSAMPLE_TURN_DEG
+) -> int:
+    """Number of exposure sub-samples so the body turns at most `max_turn_deg` (2) per sub-sample.
 
     Parameters
     ----------
@@ -81,11 +83,13 @@ def choose_n_sub(exposure_s: float, spin_period_s: float | None = None) -> int:
         Exposure time, seconds (0 gives 1).
     spin_period_s : float, optional
         Expected spin period (its sign is ignored); `DEFAULT_SPIN_PERIOD_S` when None.
+    max_turn_deg : float
+        Largest turn per sub-sample, degrees.
 
     Returns
     -------
     int
-        ``ceil(360 * exposure_s / (|spin_period_s| * MAX_SUBSAMPLE_TURN_DEG))`` within
+        ``ceil(360 * exposure_s / (|spin_period_s| * max_turn_deg))`` within
         [1, `MAX_N_SUB`].
 
     Examples
@@ -98,7 +102,7 @@ def choose_n_sub(exposure_s: float, spin_period_s: float | None = None) -> int:
         return 1
     turn_deg = 360.0 * exposure_s / period
     # Round away float noise: 0.1 s at 9 s turns exactly 4 deg, i.e. 2 slices, not 2.0000000000000004.
-    return int(min(max(math.ceil(round(turn_deg / MAX_SUBSAMPLE_TURN_DEG, 9)), 1), MAX_N_SUB))
+    return int(min(max(math.ceil(round(turn_deg / max_turn_deg, 9)), 1), MAX_N_SUB))
 
 
 @dataclass(frozen=True, eq=False)

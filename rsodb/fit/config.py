@@ -57,6 +57,10 @@ class ModelConfig:
     about in proportion, docs/fitting.md); ``normal_bins_per_step`` its shading classes per
     normal step (0: the renderer's default, 3; 1 shades a smooth glossy mesh with a few times
     fewer classes, faster, at a glint's peak 0.5% off instead of 0.1%, docs/renderer.md).
+    ``n_sub`` is the exposure sub-samples per sample (0: chosen). Chosen, they turn the body at
+    most 2 deg each at the prior's fastest spin, or, with ``sub_tolerance_mag`` > 0, as few as
+    the model's own curve needs: doubled from one until its magnitudes at a few prior draws move
+    by less than that RMS (`rsodb.fit.subsampling`).
     """
 
     shape: str = "auto"
@@ -69,6 +73,7 @@ class ModelConfig:
     renderer: str = "cached"
     accuracy_mag: float = 0.01
     n_sub: int = 0
+    sub_tolerance_mag: float = 0.0
     grid_size: int = 0
     element_size_m: float = 0.0
     normal_bins_per_step: float = 0.0
@@ -104,6 +109,16 @@ class ModelConfig:
             raise ValueError(f"[model] renderer={self.renderer!r} must be 'cached' or 'direct'")
         if not (whole_number(self.n_sub) and 0 <= self.n_sub <= 64):
             raise ValueError(f"[model] n_sub={self.n_sub!r} must be a whole number 0..64 (0 chooses it)")
+        if not (_non_negative(self.sub_tolerance_mag) and self.sub_tolerance_mag < 1):
+            raise ValueError(
+                f"[model] sub_tolerance_mag={self.sub_tolerance_mag!r} must be 0 (2 deg of turn per "
+                "sub-sample) or a small positive number of magnitudes"
+            )
+        if self.sub_tolerance_mag and self.n_sub:
+            raise ValueError(
+                f"[model] gives both n_sub={self.n_sub} and sub_tolerance_mag={self.sub_tolerance_mag}; "
+                "the tolerance chooses n_sub, keep one"
+            )
         if not (whole_number(self.grid_size) and (self.grid_size == 0 or 4 <= self.grid_size <= 256)):
             raise ValueError(
                 f"[model] grid_size={self.grid_size!r} must be 0 (chosen from the fit's planned work) "

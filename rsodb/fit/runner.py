@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from raycast.geometry.pass_geometry import choose_n_sub
+from raycast.geometry.pass_geometry import MAX_SUBSAMPLE_TURN_DEG, choose_n_sub
 from rsodb.fit.config import FitConfig
 from rsodb.fit.conventions import PERIODOGRAM_DRAWS, periodogram_period, spin_periods
 from rsodb.fit.curves import geometry_at, pass_curves
@@ -29,6 +29,7 @@ from rsodb.fit.sampler import run_sampler
 from rsodb.fit.selection import Selection, select_samples
 from rsodb.fit.shape_store import ShapeStore
 from rsodb.fit.shapes import MATERIAL_PARAMETERS, Shape, brightness_for, cache_grid_size, resolve_shape
+from rsodb.fit.subsampling import SUB_SAMPLE_DRAWS, sub_samples_needed
 from rsodb.periods.result import PeriodResult
 
 __all__ = [
@@ -76,6 +77,29 @@ def planned_frame_evaluations(config: FitConfig, observed, selection: Selection,
     return config.sampler.n_walkers * config.sampler.n_steps * selection.n * n_sub
 
 
+def measured_sub_samples(posterior_on, selection, exposure_s: float, space, fastest_s: float, config: FitConfig):
+    """(n_sub, turn per sub-sample in deg, in words): the fewest exposure sub-samples at which the
+    model's curve over the fit's samples, at a few prior draws, moves by less than
+    ``config.model.sub_tolerance_mag`` RMS when they double (`sub_samples_needed`); at most the
+    2 deg rule's count."""
+    limit = choose_n_sub(exposure_s, fastest_s)
+    thetas = space.sample_prior(np.random.default_rng(config.sampler.seed), SUB_SAMPLE_DRAWS)
+
+    def curves_at(count: int) -> np.ndarray:
+        model = posterior_on(selection, count).model
+        return np.array([model.magnitudes(space.values(theta)) for theta in thetas])
+
+    count, change = sub_samples_needed(curves_at, limit, config.model.sub_tolerance_mag)
+    if exposure_s <= 0 or count >= limit:
+        return count, MAX_SUBSAMPLE_TURN_DEG, f"{count} exposure sub-samples (2 deg of turn each)"
+    turn_deg = 360.0 * exposure_s / (fastest_s * count)
+    return (
+        count,
+        turn_deg,
+        f"{count} exposure sub-samples ({turn_deg:.3g} deg of turn each: {change:.3f} mag RMS from twice as many)",
+    )
+
+
 @dataclass(frozen=True, eq=False)
 class FitProblem:
     """A posterior ready to sample, with what is needed to summarise and store its result.
@@ -99,6 +123,11 @@ class FitProblem:
         Reference epoch of the phases: the fitted window's mid-time.
     search_selection : str
         What the search saw, in words.
+    sub_turn_deg : float
+        The body's largest turn per exposure sub-sample when ``[model] n_sub`` is 0: 2 deg, or
+        what the model's own curve was measured to need (``sub_tolerance_mag``).
+    sub_samples : str
+        The measured sub-sampling, in words (empty when not measured).
     """
 
     pass_id: str
@@ -111,6 +140,8 @@ class FitProblem:
     selection: Selection | None = None
     epoch_utc: np.datetime64 | None = None
     search_selection: str = ""
+    sub_turn_deg: float = MAX_SUBSAMPLE_TURN_DEG
+    sub_samples: str = ""
 
     @classmethod
     def build(
@@ -194,7 +225,12 @@ class FitProblem:
             )
             return Posterior(space, model, likelihood)
 
-        posterior = posterior_on(selection, config.model.n_sub or None)
+        n_sub, sub_turn_deg, sub_samples = config.model.n_sub or None, MAX_SUBSAMPLE_TURN_DEG, ""
+        if config.model.sub_tolerance_mag:
+            n_sub, sub_turn_deg, sub_samples = measured_sub_samples(
+                posterior_on, selection, selection.exposure_s(observed), space, bounds[0], config
+            )
+        posterior = posterior_on(selection, n_sub)
         search_data = replace(
             config.data,
             max_points=config.sampler.search_points,
@@ -221,6 +257,8 @@ class FitProblem:
             selection,
             epoch_utc,
             coarse.description,
+            sub_turn_deg,
+            sub_samples,
         )
 
     def curve_n_sub(self) -> int:
@@ -228,7 +266,7 @@ class FitProblem:
         if self.config.model.n_sub:
             return self.config.model.n_sub
         fastest = spin_period_bounds(self.posterior.space)[0]
-        return choose_n_sub(self.observed.exposure_s, fastest)
+        return choose_n_sub(self.observed.exposure_s, fastest, self.sub_turn_deg)
 
     def summarise(self, run, periods=None) -> FitResult:
         """The `FitResult` of a sampler run of this problem: residuals over the whole window, the
@@ -284,7 +322,7 @@ class FitProblem:
             model_curve=model_curve,
             epoch_utc=np.datetime_as_string(self.epoch_utc, unit="ms"),
             spin_periods=periods_record,
-            selection=self.selection.description,
+            selection="; ".join(filter(None, (self.selection.description, self.sub_samples))),
         )
 
 
