@@ -229,6 +229,18 @@ def test_the_real_passes_configurations_read():
     names = [r.name for r in plan.rungs_for(22076)]
     assert "topex-precessing" in names and "topex_louvered-inertial" in names and names[0] == "ellipsoid-inertial"
     assert plan.base_for(44517).parameters["spin_period_s"]["force"] is True
+    # Every rung's exposure sub-samples are measured at the ladder's margin floor (not fixed at one).
+    for norad in (22076, 44517, 51511):
+        base = plan.base_for(norad).model
+        assert (base.n_sub, base.sub_tolerance_mag) == (0, plan.settings.margin_floor_mag)
+    # TOPEX's own rungs fix one sub-sample instead (model = { n_sub = 1 }); the others measure.
+    observed = read_file(TOPEX_PHV)[0]
+    models = {rung.name: config.model for rung, config in plan.configs(observed)}
+    assert (models["topex_louvered-inertial"].n_sub, models["topex_louvered-inertial"].sub_tolerance_mag) == (1, 0.0)
+    assert (models["box_panels-inertial"].n_sub, models["box_panels-inertial"].sub_tolerance_mag) == (0, 0.02)
+    assert models["topex_louvered-inertial"].shape == "topex_louvered"
+    with pytest.raises(ValueError, match="shape"):
+        Rung.from_dict({"shape": "box", "attitude": "inertial", "model": {"shape": "ellipsoid"}})
     whole = FitConfig.from_toml(PROJECT_ROOT / "configs" / "topex_whole_pass.toml")
     assert (whole.model.shape, whole.data.duration_s) == ("topex", 0.0)
     louvered = FitConfig.from_toml(PROJECT_ROOT / "configs" / "topex_whole_pass_louvered.toml")

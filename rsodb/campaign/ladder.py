@@ -55,6 +55,8 @@ ATTITUDE_RANK = MappingProxyType({"inertial": 0, "inertial_tilted": 1, "precessi
 # Shapes that look the same after half a turn about their spin axis: their light curve repeats
 # twice per spin, so their spin period is twice the light curve's.
 HALF_TURN_SYMMETRIC = frozenset({"ellipsoid", "box"})
+# [model] keys a rung sets itself (its shape, a built-in model, and its attitude family).
+RUNG_OWN_MODEL_KEYS = ("shape", "attitude", "mesh", "materials", "articulations")
 # The start of the status of a rung whose model gives no light on some held-out samples.
 DARK_STATUS = "model dark at"
 # Fewest bootstrap blocks in the held-out part (blocks are shortened to keep this many).
@@ -67,13 +69,15 @@ class Rung:
 
     ``parameters`` overlay the base configuration's (e.g. a wider spin-period prior, or a model's
     surface parameters freed with ``{}``); ``sampler`` overlays its sampler settings (e.g. a longer
-    ``time_limit_s`` for a rung with more parameters).
+    ``time_limit_s`` for a rung with more parameters); ``model`` its ``[model]`` settings other
+    than the shape (e.g. ``n_sub = 1``, which replaces the base's ``sub_tolerance_mag``).
     """
 
     shape: str
     attitude: str
     parameters: Mapping[str, Any] = field(default_factory=dict)
     sampler: Mapping[str, Any] = field(default_factory=dict)
+    model: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self):
         if self.shape not in SHAPES:
@@ -82,16 +86,27 @@ class Rung:
             raise ValueError(f"ladder rung attitude={self.attitude!r} is not one of {', '.join(ATTITUDES)}")
         object.__setattr__(self, "parameters", MappingProxyType(dict(self.parameters)))
         object.__setattr__(self, "sampler", MappingProxyType(dict(self.sampler)))
+        own = sorted(set(self.model) & set(RUNG_OWN_MODEL_KEYS))
+        if own:
+            raise ValueError(
+                f"ladder rung {self.name}: model = {{...}} may not set {', '.join(own)} "
+                "(a rung's shape and attitude are its own keys)"
+            )
+        object.__setattr__(self, "model", MappingProxyType(dict(self.model)))
 
     @classmethod
     def from_dict(cls, record: Mapping) -> Rung:
-        unknown = sorted(set(record) - {"shape", "attitude", "parameters", "sampler"})
+        unknown = sorted(set(record) - {"shape", "attitude", "parameters", "sampler", "model"})
         if unknown or "shape" not in record or "attitude" not in record:
             raise ValueError(
-                f"a ladder rung needs shape and attitude (optional parameters, sampler); got {dict(record)!r}"
+                f"a ladder rung needs shape and attitude (optional parameters, sampler, model); got {dict(record)!r}"
             )
         return cls(
-            record["shape"], record["attitude"], dict(record.get("parameters", {})), dict(record.get("sampler", {}))
+            record["shape"],
+            record["attitude"],
+            dict(record.get("parameters", {})),
+            dict(record.get("sampler", {})),
+            dict(record.get("model", {})),
         )
 
     @property
@@ -108,8 +123,17 @@ class Rung:
         parameters.update(self.parameters)
         record = base.to_dict()
         record.update(name=f"{ladder}.{self.name}", parameters=parameters)
+        overlay = dict(self.model)
+        if overlay.get("n_sub"):
+            overlay.setdefault("sub_tolerance_mag", 0.0)  # a fixed count replaces the measured one
         record["model"] = dict(
-            record["model"], shape=self.shape, attitude=self.attitude, mesh="", materials="", articulations=[]
+            record["model"],
+            shape=self.shape,
+            attitude=self.attitude,
+            mesh="",
+            materials="",
+            articulations=[],
+            **overlay,
         )
         record["data"] = dict(record["data"], start_s=0.0, duration_s=float(duration_s))
         # emcee's stretch move needs more than twice as many walkers as free parameters (+ jitter).
