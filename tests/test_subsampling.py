@@ -94,3 +94,11 @@ def test_a_tolerance_and_a_fixed_count_together_are_refused():
         FitConfig.from_dict({"model": {"n_sub": 2, "sub_tolerance_mag": 0.02}})
     with pytest.raises(ValueError, match="sub_tolerance_mag"):
         FitConfig.from_dict({"model": {"sub_tolerance_mag": -0.1}})
+
+
+def test_a_slow_smooth_body_keeps_one_sub_sample_and_says_so(uzhhorod_v):
+    # 1 s exposures of a 100 s spin turn the body 3.6 deg: the 2 deg rule would take 2 renders.
+    measured = problem(uzhhorod_v, "ellipsoid", 100.0, sub_tolerance_mag=TOLERANCE_MAG)
+    assert choose_n_sub(uzhhorod_v.exposure_s, 100.0) == 2
+    assert measured.posterior.model.geometry.n_sub == 1
+    assert measured.sub_samples.startswith("1 exposure sub-sample (3.6 deg of turn each: 0.00")

@@ -90,14 +90,11 @@ def measured_sub_samples(posterior_on, selection, exposure_s: float, space, fast
         return np.array([model.magnitudes(space.values(theta)) for theta in thetas])
 
     count, change = sub_samples_needed(curves_at, limit, config.model.sub_tolerance_mag)
+    counted = f"{count} exposure sub-sample{'' if count == 1 else 's'}"
     if exposure_s <= 0 or count >= limit:
-        return count, MAX_SUBSAMPLE_TURN_DEG, f"{count} exposure sub-samples (2 deg of turn each)"
+        return count, MAX_SUBSAMPLE_TURN_DEG, f"{counted} (the 2 deg rule's count, the most it takes)"
     turn_deg = 360.0 * exposure_s / (fastest_s * count)
-    return (
-        count,
-        turn_deg,
-        f"{count} exposure sub-samples ({turn_deg:.3g} deg of turn each: {change:.3f} mag RMS from twice as many)",
-    )
+    return count, turn_deg, f"{counted} ({turn_deg:.3g} deg of turn each: {change:.3f} mag RMS from twice as many)"
 
 
 @dataclass(frozen=True, eq=False)
