@@ -52,8 +52,7 @@ def build(observed, shape: str, period_s: float, **model) -> FitProblem:
 
 
 def curves(problem: FitProblem, thetas) -> np.ndarray:
-    space, model = problem.posterior.space, problem.posterior.model
-    return np.array([model.magnitudes(space.values(theta)) for theta in thetas])
+    return np.array([problem.posterior.magnitudes(theta) for theta in thetas])
 
 
 def evaluation_ms(problem: FitProblem, theta) -> float:

@@ -72,7 +72,7 @@ def test_the_measured_count_is_as_good_as_the_2_deg_rule_at_a_fraction_of_its_co
     reference = problem(uzhhorod_v, shape, period_s, n_sub=rule)
     space = measured.posterior.space
     thetas = space.sample_prior(np.random.default_rng(1), SUB_SAMPLE_DRAWS)
-    curves = [np.array([p.posterior.model.magnitudes(space.values(t)) for t in thetas]) for p in (measured, reference)]
+    curves = [np.array([p.posterior.magnitudes(t) for t in thetas]) for p in (measured, reference)]
     # Other draws than the measurement's, against the rule's own count: within twice the tolerance.
     assert magnitude_change(*curves) < 2 * TOLERANCE_MAG
     # The stored fit says what was chosen, and the pass-wide curves use the same turn per sub-sample.
@@ -85,7 +85,7 @@ def test_the_measured_count_is_as_good_as_the_2_deg_rule_at_a_fraction_of_its_co
         # A flat glossy wing glints for a few degrees of a 75 deg turn: it needs many.
         assert 8 <= count < rule
         one = problem(uzhhorod_v, shape, period_s, n_sub=1)
-        curves_one = np.array([one.posterior.model.magnitudes(space.values(t)) for t in thetas])
+        curves_one = np.array([one.posterior.magnitudes(t) for t in thetas])
         assert magnitude_change(curves_one, curves[1]) > 5 * TOLERANCE_MAG
 
 

@@ -78,23 +78,28 @@ def planned_frame_evaluations(config: FitConfig, observed, selection: Selection,
 
 
 def measured_sub_samples(posterior_on, selection, exposure_s: float, space, fastest_s: float, config: FitConfig):
-    """(n_sub, turn per sub-sample in deg, in words): the fewest exposure sub-samples at which the
-    model's curve over the fit's samples, at a few prior draws, moves by less than
-    ``config.model.sub_tolerance_mag`` RMS when they double (`sub_samples_needed`); at most the
-    2 deg rule's count."""
+    """(posterior, turn per sub-sample in deg, in words): the posterior on `selection` with the
+    fewest exposure sub-samples at which the model's curve over the fit's samples, at a few prior
+    draws, moves by less than ``config.model.sub_tolerance_mag`` RMS when they double
+    (`sub_samples_needed`); at most the 2 deg rule's count."""
     limit = choose_n_sub(exposure_s, fastest_s)
     thetas = space.sample_prior(np.random.default_rng(config.sampler.seed), SUB_SAMPLE_DRAWS)
+    built = {}  # the posteriors measured, by count: the chosen one is the fit's
 
     def curves_at(count: int) -> np.ndarray:
-        model = posterior_on(selection, count).model
-        return np.array([model.magnitudes(space.values(theta)) for theta in thetas])
+        built[count] = posterior_on(selection, count)
+        return np.array([built[count].magnitudes(theta) for theta in thetas])
 
     count, change = sub_samples_needed(curves_at, limit, config.model.sub_tolerance_mag)
     counted = f"{count} exposure sub-sample{'' if count == 1 else 's'}"
     if exposure_s <= 0 or count >= limit:
-        return count, MAX_SUBSAMPLE_TURN_DEG, f"{counted} (the 2 deg rule's count, the most it takes)"
+        return built[count], MAX_SUBSAMPLE_TURN_DEG, f"{counted} (the 2 deg rule's count, the most it takes)"
     turn_deg = 360.0 * exposure_s / (fastest_s * count)
-    return count, turn_deg, f"{counted} ({turn_deg:.3g} deg of turn each: {change:.3f} mag RMS from twice as many)"
+    return (
+        built[count],
+        turn_deg,
+        f"{counted} ({turn_deg:.3g} deg of turn each: {change:.3f} mag RMS from twice as many)",
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -222,12 +227,16 @@ class FitProblem:
             )
             return Posterior(space, model, likelihood)
 
-        n_sub, sub_turn_deg, sub_samples = config.model.n_sub or None, MAX_SUBSAMPLE_TURN_DEG, ""
         if config.model.sub_tolerance_mag:
-            n_sub, sub_turn_deg, sub_samples = measured_sub_samples(
+            posterior, sub_turn_deg, sub_samples = measured_sub_samples(
                 posterior_on, selection, selection.exposure_s(observed), space, bounds[0], config
             )
-        posterior = posterior_on(selection, n_sub)
+        else:
+            posterior, sub_turn_deg, sub_samples = (
+                posterior_on(selection, config.model.n_sub or None),
+                MAX_SUBSAMPLE_TURN_DEG,
+                "",
+            )
         search_data = replace(
             config.data,
             max_points=config.sampler.search_points,
